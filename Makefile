@@ -1,0 +1,35 @@
+# rover-sim: `make demo` and `make test` each set up .venv on first use.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+export MUJOCO_GL ?= egl
+
+.PHONY: demo test test-all bench lint clean setup
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[test]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/rover-sim check-gl
+	$(BIN)/rover-sim demo --out runs/demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -q -m ''
+
+bench: $(STAMP)
+	$(BIN)/rover-sim bench slip --json runs/bench/slip.json
+
+lint: $(STAMP)
+	$(BIN)/ruff check rover_sim nav terrains tests
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache build *.egg-info

@@ -1,0 +1,36 @@
+"""All rover-sim exceptions, each saying what went wrong and how to fix it (Gymnasium ``error.py`` style)."""
+
+from __future__ import annotations
+
+
+class RoverSimError(Exception):
+    """Base class of every error rover-sim raises on purpose."""
+
+
+class PhysicsDiverged(RoverSimError):
+    """The simulation produced NaN/Inf or MuJoCo instability warnings; the run stops and keeps what it recorded."""
+
+    def __init__(self, time_s: float, cause: str) -> None:
+        self.time_s = time_s
+        self.cause = cause
+        super().__init__(
+            f"physics diverged at t={time_s:.3f} s: {cause}. Try a smaller timestep (--set physics.timestep_s=...) "
+            "or check the terrain for extreme slopes/rock overlaps."
+        )
+
+
+class ConfigError(RoverSimError):
+    """A scenario or config file is invalid: names the file, the field and the allowed range."""
+
+    def __init__(self, path: str, field: str, message: str) -> None:
+        self.path, self.field = path, field
+        super().__init__(f"{path}: field '{field}': {message}")
+
+
+class RenderingUnavailable(RoverSimError):
+    """No offscreen OpenGL (EGL) is available."""
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(
+            f"offscreen rendering needs EGL ({detail}). On Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri"
+        )

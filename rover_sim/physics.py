@@ -1,0 +1,289 @@
+"""Physics stepping of the MER rover with the wheel–soil law, behind named accessors (dm_control style)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from nav.types import STEERED, WHEELS
+from rover_sim.errors import PhysicsDiverged
+from rover_sim.terramechanics import WheelSoilLaw, WheelSoilState
+from rover_sim.world import Sun, build_spec
+
+if TYPE_CHECKING:
+    from terrains import Terrain
+
+WHEEL_RADIUS_M = 0.125
+WHEEL_WIDTH_M = 0.16
+HOME_BODY_HEIGHT_M = 0.525  # rover-frame origin above flat ground at the home pose
+ROCK_CONTACT_MARGIN_M = 0.03  # a wheel contact this far above the heightfield is on a rock
+MATERIAL_ROCK = 1  # rocks are treated as bedrock by the wheel-soil law
+_DIVERGENCE_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+)
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """True rover state at one instant (for logging and evaluation only; never fed to estimators)."""
+
+    t_s: float
+    position_m: np.ndarray  # (3,) world
+    quat_wxyz: np.ndarray  # (4,) world <- rover
+    wheel_slip: np.ndarray  # (6,) WHEELS order, NaN where not rolling
+    wheel_sinkage_m: np.ndarray  # (6,)
+    wheel_load_n: np.ndarray  # (6,)
+    wheel_in_contact: np.ndarray  # (6,) bool
+    tilt_deg: float  # angle between the rover z axis and world up
+
+
+def yaw_on_slope_quat_wxyz(normal: np.ndarray, yaw_rad: float) -> np.ndarray:
+    """Orientation whose z axis is ``normal`` and whose x axis points along ``yaw_rad`` projected on the slope."""
+    z = normal / np.linalg.norm(normal)
+    heading = np.array([np.cos(yaw_rad), np.sin(yaw_rad), 0.0])
+    x = heading - heading.dot(z) * z
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z], axis=1)
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, R.ravel())
+    return q
+
+
+class RoverSim:
+    """A MER rover on a terrain: physics, the wheel–soil law and named accessors.
+
+    ``soil_law=False`` gives the bare MuJoCo model (frictionless wheels, nothing applied) for speed comparisons.
+    """
+
+    def __init__(
+        self,
+        terrain: Terrain,
+        sun: Sun | None = None,
+        soil_law: bool = True,
+        texture_rgb: np.ndarray | None = None,
+        timestep_s: float | None = None,
+    ) -> None:
+        self.terrain = terrain
+        self.sun = sun or Sun()
+        self.spec = build_spec(terrain, self.sun, texture_rgb=texture_rgb)
+        if timestep_s is not None:
+            self.spec.option.timestep = timestep_s
+        self.model = self.spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.soil_law_enabled = soil_law
+        self.law = WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
+        m = self.model
+        self._wheel_body = np.array([m.body(f"wheel_{w}").id for w in WHEELS])
+        self._wheel_qadr = np.array([m.jnt_qposadr[m.joint(f"wheel_{w}").id] for w in WHEELS])
+        self._wheel_act = np.array([m.actuator(f"wheel_{w}_drive").id for w in WHEELS])
+        assert (np.diff(self._wheel_act) == 1).all(), "wheel actuators must be contiguous in rover.xml"
+        self._steer_act = np.array([m.actuator(f"steer_{w}").id for w in STEERED])
+        self._steer_qadr = np.array([m.jnt_qposadr[m.joint(f"steer_{w}").id] for w in STEERED])
+        self._mast_act = np.array([m.actuator("mast_pan").id, m.actuator("mast_tilt").id])
+        self._mast_qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in ("mast_pan", "mast_tilt")])
+        self._rocker_qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in ("rocker_left", "rocker_right")])
+        self._bogie_qadr = np.array([m.jnt_qposadr[m.joint(n).id] for n in ("bogie_left", "bogie_right")])
+        # wheel-soil inputs are grouped in the sensor array: (6 x 7) contact, (6 x 3) hub velocity,
+        # (6 x 3) heading, (6,) spin rate -- see models/mer/rover.xml
+        a0 = m.sensor_adr[m.sensor("wheel_lf_contact").id]
+        self._sd_contact = slice(a0, a0 + 42)
+        self._sd_vel = slice(a0 + 42, a0 + 60)
+        self._sd_heading = slice(a0 + 60, a0 + 78)
+        self._sd_rate = slice(a0 + 78, a0 + 84)
+        self._sd_view = self.data.sensordata[a0 : a0 + 84]
+        self._wrench: list[tuple[float, ...]] = [(0.0,) * 6] * 6
+        assert m.sensor_adr[m.sensor("wheel_rr_rate").id] == a0 + 83, "sensor layout changed in rover.xml"
+        self._imu_gyro = self._sensor_slice("imu_gyro")
+        self._imu_accel = self._sensor_slice("imu_accel")
+        # cached views into MjData (valid for the lifetime of self.data)
+        self._sensordata = self.data.sensordata
+        self._xfrc = self.data.xfrc_applied
+        self._ctrl = self.data.ctrl
+        self._xipos = self.data.xipos
+        # terrain lookup for the material under each wheel
+        self._mat_list = np.asarray(terrain.materials, dtype=int).tolist()
+        self._h_list = np.asarray(terrain.heights_m, dtype=float).tolist()
+        self._nrow, self._ncol = np.shape(terrain.heights_m)
+        self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
+        self._inv_cell = 1.0 / terrain.cell_size_m
+        self.wheel_ref_rad = np.zeros(6)
+        self.reset()
+
+    # ------------------------------------------------------------------ setup
+    def _sensor_slice(self, name: str) -> slice:
+        s = self.model.sensor(name)
+        return slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
+
+    def reset(self) -> None:
+        mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key("home").id)
+        self.law.reset()
+        self.wheel_ref_rad[:] = 0.0
+        mujoco.mj_forward(self.model, self.data)
+
+    def place(self, x_m: float, y_m: float, yaw_rad: float, settle_s: float = 1.5) -> None:
+        """Put the rover at (x, y) with heading ``yaw_rad``, aligned with the local slope, and let it settle."""
+        self.reset()
+        t = self.terrain
+        n = t.normal_at(np.array([x_m]), np.array([y_m])).reshape(3)
+        q = yaw_on_slope_quat_wxyz(n, yaw_rad)
+        # the highest ground under the wheel footprint decides the drop height
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, q)
+        R = R.reshape(3, 3)
+        foot = np.array([[x, y, 0.0] for x in (-0.55, 0.0, 0.55) for y in (-0.55, 0.55)]) @ R.T
+        ground = t.height_at(x_m + foot[:, 0], y_m + foot[:, 1]) - foot[:, 2]
+        z = float(ground.max()) + HOME_BODY_HEIGHT_M + 0.01
+        self.data.qpos[0:3] = [x_m, y_m, z]
+        self.data.qpos[3:7] = q
+        self.data.qvel[:] = 0.0
+        mujoco.mj_forward(self.model, self.data)
+        self.hold()
+        if settle_s > 0:
+            self.step_for(settle_s)
+
+    # ------------------------------------------------------------------ commands
+    def hold(self) -> None:
+        """Park: wheel references stay where the wheels are (the non-back-drivable drives hold them)."""
+        self.wheel_ref_rad[:] = self.data.qpos[self._wheel_qadr]
+        self._ctrl[self._wheel_act] = self.wheel_ref_rad
+
+    def set_steering_rad(self, angles_rad: np.ndarray) -> None:
+        self._ctrl[self._steer_act] = angles_rad
+
+    def set_mast(self, pan_rad: float, tilt_rad: float) -> None:
+        self._ctrl[self._mast_act] = [pan_rad, tilt_rad]
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, wheel_rate_rad_s: np.ndarray | None = None, n_steps: int = 1) -> None:
+        """Advance ``n_steps`` physics steps with the wheels commanded at ``wheel_rate_rad_s`` (None = hold)."""
+        m, d = self.model, self.data
+        dt = m.opt.timestep
+        ctrl_wheels = self._ctrl[self._wheel_act[0] : self._wheel_act[0] + 6]
+        increment = None if wheel_rate_rad_s is None else np.asarray(wheel_rate_rad_s, dtype=float) * dt
+        for _ in range(n_steps):
+            if increment is not None:
+                self.wheel_ref_rad += increment
+                ctrl_wheels[:] = self.wheel_ref_rad
+            if self.soil_law_enabled:
+                self._apply_soil_law(dt)
+            mujoco.mj_step(m, d)
+        self._check_divergence()
+
+    def step_for(self, duration_s: float, wheel_rate_rad_s: np.ndarray | None = None) -> None:
+        n = int(round(duration_s / self.model.opt.timestep))
+        chunk = 200
+        while n > 0:
+            k = min(chunk, n)
+            self.step(wheel_rate_rad_s, k)
+            n -= k
+
+    def _apply_soil_law(self, dt: float) -> None:
+        sd = self._sd_view.tolist()  # all wheel-soil inputs in one read (layout: models/mer/rover.xml)
+        pos = [(sd[k], sd[k + 1], sd[k + 2]) for k in (4, 11, 18, 25, 32, 39)]
+        f = self.law.evaluate(sd, self._material_under(pos), dt)
+        com = self._xipos[self._wheel_body].tolist()
+        wrench = self._wrench
+        for w in range(6):
+            fx, fy, fz = f[3 * w], f[3 * w + 1], f[3 * w + 2]
+            (px, py, pz), (cx, cy, cz) = pos[w], com[w]
+            rx, ry, rz = px - cx, py - cy, pz - cz
+            wrench[w] = (fx, fy, fz, ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx)
+        self._xfrc[self._wheel_body] = wrench
+
+    def _material_under(self, pos: list[tuple[float, float, float]]) -> list[int]:
+        """Material index under each wheel contact; a contact well above the heightfield is on a rock."""
+        out = []
+        for x, y, z in pos:
+            j = min(max(int((x + self._half_x) * self._inv_cell + 0.5), 0), self._ncol - 1)
+            i = min(max(int((y + self._half_y) * self._inv_cell + 0.5), 0), self._nrow - 1)
+            on_rock = z > self._h_list[i][j] + ROCK_CONTACT_MARGIN_M
+            out.append(MATERIAL_ROCK if on_rock else self._mat_list[i][j])
+        return out
+
+    def _check_divergence(self) -> None:
+        d = self.data
+        for w in _DIVERGENCE_WARNINGS:
+            if d.warning[w].number > 0:
+                raise PhysicsDiverged(d.time, f"MuJoCo warning {mujoco.mjtWarning(w).name}")
+        if not np.isfinite(d.qpos).all() or not np.isfinite(d.qvel).all():
+            raise PhysicsDiverged(d.time, "non-finite state (NaN/Inf in qpos or qvel)")
+        if abs(d.qvel[0:3]).max() > 20.0:
+            raise PhysicsDiverged(d.time, f"rover speed {np.linalg.norm(d.qvel[0:3]):.1f} m/s is unphysical")
+
+    # ------------------------------------------------------------------ named accessors
+    @property
+    def time_s(self) -> float:
+        return float(self.data.time)
+
+    @property
+    def timestep_s(self) -> float:
+        return float(self.model.opt.timestep)
+
+    def position_m(self) -> np.ndarray:
+        return self.data.qpos[0:3].copy()
+
+    def quat_wxyz(self) -> np.ndarray:
+        return self.data.qpos[3:7].copy()
+
+    def rotation(self) -> np.ndarray:
+        return self.data.xmat[self.model.body("rover").id].reshape(3, 3).copy()
+
+    def wheel_angles_rad(self) -> np.ndarray:
+        return self.data.qpos[self._wheel_qadr].copy()
+
+    def steer_angles_rad(self) -> np.ndarray:
+        return self.data.qpos[self._steer_qadr].copy()
+
+    def mast_angles_rad(self) -> np.ndarray:
+        return self.data.qpos[self._mast_qadr].copy()
+
+    def rocker_angles_rad(self) -> np.ndarray:
+        return self.data.qpos[self._rocker_qadr].copy()
+
+    def bogie_angles_rad(self) -> np.ndarray:
+        return self.data.qpos[self._bogie_qadr].copy()
+
+    def imu_raw(self) -> tuple[np.ndarray, np.ndarray]:
+        """Noise-free gyro (rad/s) and accelerometer (m/s^2) at the IMU site, body frame."""
+        return self._sensordata[self._imu_gyro].copy(), self._sensordata[self._imu_accel].copy()
+
+    def wheel_soil_state(self) -> WheelSoilState:
+        return self.law.state
+
+    def tilt_deg(self) -> float:
+        return float(np.degrees(np.arccos(np.clip(self.rotation()[2, 2], -1.0, 1.0))))
+
+    def ground_truth(self) -> GroundTruth:
+        s = self.law.state
+        return GroundTruth(
+            t_s=self.time_s,
+            position_m=self.position_m(),
+            quat_wxyz=self.quat_wxyz(),
+            wheel_slip=s.slip.copy(),
+            wheel_sinkage_m=s.sinkage_m.copy(),
+            wheel_load_n=s.normal_force_n.copy(),
+            wheel_in_contact=self.wheels_in_contact(),
+            tilt_deg=self.tilt_deg(),
+        )
+
+    def wheels_in_contact(self) -> np.ndarray:
+        """(6,) bool: each wheel touches the ground or a rock (from MuJoCo's contact sensors)."""
+        return self._sensordata[self._sd_contact].reshape(6, 7)[:, 0] > 0
+
+    def body_contacts(self) -> list[str]:
+        """Names of non-wheel rover geoms touching the terrain or a rock (a collision, for GESTALT checks)."""
+        m, d = self.model, self.data
+        names = []
+        for g1, g2 in d.contact.geom[: d.ncon]:
+            for a, b in ((g1, g2), (g2, g1)):
+                na = m.geom(a).name
+                if m.geom_bodyid[b] == 0 and not na.startswith("wheel_") and m.geom_bodyid[a] != 0:
+                    names.append(na)
+        return names

@@ -1,0 +1,102 @@
+"""World assembly: the MER model + a synthesised terrain (heightfield, rocks, appearance) + the sun, via MjSpec."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+if TYPE_CHECKING:
+    from terrains import Terrain
+
+
+MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+SCENE_XML = MODELS_DIR / "mer" / "scene.xml"
+ROVER_XML = MODELS_DIR / "mer" / "rover.xml"
+
+HFIELD_BASE_M = 1.0  # thickness of the heightfield slab below its lowest point
+ROCK_GEOM_PREFIX = "rock_"
+
+
+@dataclass(frozen=True)
+class Sun:
+    """A directional light. Azimuth from +x (east) toward +y (north), elevation above the horizon."""
+
+    azimuth_deg: float = 135.0
+    elevation_deg: float = 45.0
+    shadows: bool = True
+
+    def direction(self) -> np.ndarray:
+        """Unit vector along which sunlight travels (from the sun toward the ground)."""
+        az, el = np.radians(self.azimuth_deg), np.radians(self.elevation_deg)
+        to_sun = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        return -to_sun
+
+
+def hfield_encoding(heights_m: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """MuJoCo stores heights normalised to [0, 1] times ``size[2]`` above the geom's z: returns
+    (normalised data, elevation range m, base z m)."""
+    h_min, h_max = float(heights_m.min()), float(heights_m.max())
+    rng = max(h_max - h_min, 1e-3)
+    return ((heights_m - h_min) / rng).astype(np.float32), rng, h_min
+
+
+def build_spec(
+    terrain: Terrain,
+    sun: Sun | None = None,
+    texture_rgb: np.ndarray | None = None,
+    texture_size_m: float | None = None,
+) -> mujoco.MjSpec:
+    """Scene spec with the terrain's heightfield, one mesh geom per rock and the sun.
+
+    ``texture_rgb`` (H, W, 3) uint8, if given, is draped over the whole terrain (``texture_size_m`` per repeat,
+    default the terrain's extent), so the albedo is world-fixed as stereo and VO require.
+    """
+    sun = sun or Sun()
+    spec = mujoco.MjSpec.from_file(str(SCENE_XML))
+    data, elev_range_m, base_z_m = hfield_encoding(terrain.heights_m)
+    hf = spec.hfield("terrain")
+    hf.nrow, hf.ncol = terrain.heights_m.shape
+    hf.size = [terrain.half_x_m, terrain.half_y_m, elev_range_m, HFIELD_BASE_M]
+    hf.userdata = data.ravel().tolist()
+    geom = spec.geom("terrain")
+    geom.pos = [0.0, 0.0, base_z_m]
+
+    if texture_rgb is not None:
+        tex = spec.texture("terrain_albedo")
+        h, w, _ = texture_rgb.shape
+        tex.builtin = mujoco.mjtBuiltin.mjBUILTIN_NONE
+        tex.width, tex.height, tex.nchannel = w, h, 3
+        tex.data = np.ascontiguousarray(texture_rgb, dtype=np.uint8).tobytes()
+        mat = spec.material("terrain")
+        rep = (texture_size_m or 2 * terrain.half_x_m, texture_size_m or 2 * terrain.half_y_m)
+        mat.texrepeat = [2 * terrain.half_x_m / rep[0], 2 * terrain.half_y_m / rep[1]]
+        mat.texuniform = False
+
+    for i, rock in enumerate(terrain.rocks):
+        mesh = rock.mesh()
+        name = f"{ROCK_GEOM_PREFIX}{i:04d}"
+        spec.add_mesh(name=name, uservert=np.asarray(mesh.vertices, dtype=float).ravel().tolist(),
+                      userface=np.asarray(mesh.faces, dtype=int).ravel().tolist())
+        g = spec.worldbody.add_geom()
+        g.name = name
+        g.type = mujoco.mjtGeom.mjGEOM_MESH
+        g.meshname = name
+        g.material = "rock"
+        g.contype, g.conaffinity, g.condim = 0, 1, 3
+        g.friction = [0.8, 0.02, 0.001]
+        g.group = 0
+
+    light = spec.light("sun")
+    light.dir = sun.direction().tolist()
+    light.castshadow = sun.shadows
+    return spec
+
+
+def compile_world(spec: mujoco.MjSpec) -> mujoco.MjModel:
+    model = spec.compile()
+    return model
