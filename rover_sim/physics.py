@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -20,6 +19,9 @@ if TYPE_CHECKING:
 WHEEL_RADIUS_M = 0.125
 WHEEL_WIDTH_M = 0.16
 HOME_BODY_HEIGHT_M = 0.525  # rover-frame origin above flat ground at the home pose
+WHEEL_BOTTOMS_ROVER_M = np.array(
+    [[x, y, -HOME_BODY_HEIGHT_M] for x in (0.55, 0.0, -0.55) for y in (0.55, -0.55)]
+)  # wheel contact points at the home pose, rover frame
 ROCK_CONTACT_MARGIN_M = 0.03  # a wheel contact this far above the heightfield is on a rock
 MATERIAL_ROCK = 1  # rocks are treated as bedrock by the wheel-soil law
 _DIVERGENCE_WARNINGS = (
@@ -133,13 +135,12 @@ class RoverSim:
         t = self.terrain
         n = t.normal_at(np.array([x_m]), np.array([y_m])).reshape(3)
         q = yaw_on_slope_quat_wxyz(n, yaw_rad)
-        # the highest ground under the wheel footprint decides the drop height
+        # lowest body height at which every wheel bottom clears the ground (+1 cm), then drop
         R = np.zeros(9)
         mujoco.mju_quat2Mat(R, q)
-        R = R.reshape(3, 3)
-        foot = np.array([[x, y, 0.0] for x in (-0.55, 0.0, 0.55) for y in (-0.55, 0.55)]) @ R.T
-        ground = t.height_at(x_m + foot[:, 0], y_m + foot[:, 1]) - foot[:, 2]
-        z = float(ground.max()) + HOME_BODY_HEIGHT_M + 0.01
+        bottoms = WHEEL_BOTTOMS_ROVER_M @ R.reshape(3, 3).T
+        ground = t.height_at(x_m + bottoms[:, 0], y_m + bottoms[:, 1]) - bottoms[:, 2]
+        z = float(np.max(ground)) + 0.01
         self.data.qpos[0:3] = [x_m, y_m, z]
         self.data.qpos[3:7] = q
         self.data.qvel[:] = 0.0
@@ -234,6 +235,10 @@ class RoverSim:
 
     def rotation(self) -> np.ndarray:
         return self.data.xmat[self.model.body("rover").id].reshape(3, 3).copy()
+
+    def wheel_centres_m(self) -> np.ndarray:
+        """(6, 3) wheel-centre positions in the world frame, WHEELS order."""
+        return self.data.xpos[self._wheel_body].copy()
 
     def wheel_angles_rad(self) -> np.ndarray:
         return self.data.qpos[self._wheel_qadr].copy()

@@ -16,10 +16,11 @@ Per wheel (vectorised over the six):
 3. **Shear strength** (Mohr–Coulomb): ``F_max = c A + W tan(phi)``.
 4. **Shear displacement** ``j`` (a 2-vector: longitudinal, lateral) is a state. Under a rolling wheel the soil
    element entering the patch has ``j = 0`` and leaving it has ``j = i L`` (Janosi & Hanamoto 1961; Wong & Reece
-   1967): we integrate ``dj/dt = v_slip - (V / L) j`` with ``V = max(|r omega|, |v_x|)``, whose steady state is
-   ``j = i L`` for slip ratio ``i = (r omega - v_x) / (r omega)`` and lateral ``j_y = -v_y L / V``; at rest
-   (``V = 0``) the displacement is held, so a parked rover on a slope is held by the mobilised shear stress
-   (the soil acts as a stiff spring) instead of creeping.
+   1967): we integrate ``dj/dt = v_slip - (V / L) j``, whose steady state is
+   ``j = i L`` for slip ratio ``i = (r omega - v_x) / (r omega)`` and lateral ``j_y = -v_y L / V``. Here
+   ``V = |r omega|``: fresh soil enters the patch only as the wheel rolls, so a held wheel keeps its mobilised
+   shear (a parked rover is held by the soil acting as a stiff spring instead of creeping) and a locked wheel
+   dragged along mobilises the full strength (Coulomb-like sliding).
 5. **Shear mobilisation** averaged over the patch (Janosi–Hanamoto integrated along ``x``)::
 
        F = F_max * (1 - (K / j) (1 - exp(-j / K)))   with j = |j|, direction of j
@@ -119,6 +120,7 @@ class WheelSoilState:
 
 _ROLLING_EPS_M_S = 1e-4  # rim speeds below this count as "not rolling" for the slip ratio
 _RC_SMOOTHING_M_S = 0.005  # compaction resistance fades in over this hub speed (tanh), no chatter at rest
+_J_CAP_K = 50.0  # shear displacement is capped at this many K (the law is saturated there)
 _BRISTLE_DAMPING_RATIO = 0.7  # damping ratio of the shear spring (initial stiffness F_max / 2K) per wheel
 
 
@@ -238,8 +240,10 @@ class WheelSoilLaw:
             L = r * acos(max(1.0 - z / r, -1.0)) + tread
             self._patch[w] = L
             f_max = cb * L + W * tan_phi
-            # step 4: shear displacement, exact integration of dj/dt = v_slip - (V/L) j
-            a = max(abs(v_rim), abs(v_x)) / L
+            # step 4: shear displacement, exact integration of dj/dt = v_slip - (V/L) j. Fresh soil enters the
+            # patch only as the wheel *rolls* (V = |r omega|): a held wheel keeps its mobilised shear (a parked
+            # rover does not creep) and a locked, dragged wheel mobilises the full strength F_max.
+            a = abs(v_rim) / L
             if a * dt_s > 1e-9:
                 decay = exp(-a * dt_s)
                 gain = (1.0 - decay) / a
@@ -248,6 +252,8 @@ class WheelSoilLaw:
             jx0, jy0 = self._jx[w], self._jy[w]
             jx = jx0 * decay + (v_rim - v_x) * gain
             jy = jy0 * decay - v_y * gain
+            j_cap = _J_CAP_K * K  # beyond this the mobilised shear is F_max to 1 part in 50
+            jx, jy = min(max(jx, -j_cap), j_cap), min(max(jy, -j_cap), j_cap)
             self._jx[w], self._jy[w] = jx, jy
             # step 5: Janosi-Hanamoto mobilisation averaged over the patch, along the shear displacement
             j = sqrt(jx * jx + jy * jy)

@@ -1,8 +1,8 @@
 """Procedural planetary terrain synthesis (pure numpy/scipy/trimesh/pydantic; no MuJoCo, no rerun).
 
 A :class:`TerrainRecipe` (typed, validated) plus a seed gives a :class:`Terrain` via :func:`synthesize`: a
-heightfield on a centred grid in the MuJoCo hfield convention, a material map (sand / bedrock / mixed) and analytic
-rocks (the four rock models of Li et al.). :func:`albedo_texture` paints the ground for the renderer.
+heightfield on a centred grid in the MuJoCo hfield convention, a material map (sand / bedrock / mixed) and
+analytic rocks (the four rock models of Li et al.). :func:`albedo_texture` paints the ground for the renderer.
 
     >>> from terrains import TerrainRecipe, SlopeSpec, synthesize
     >>> terrain = synthesize(TerrainRecipe(size_m=(10, 10), slope=SlopeSpec(slope_deg=17)), seed=3)
