@@ -1,0 +1,700 @@
+"""Rerun recording of a simulated traverse: one ``log_<stream>()`` method per data stream.
+
+The entity tree mirrors the frame tree (rerun ``nuscenes`` example style)::
+
+    world                                   ViewCoordinates RIGHT_HAND_Z_UP (x east, y north, z up), static
+    world/terrain                           Mesh3D coloured by material, static
+    world/terrain/rocks                     Mesh3D of every rock, static
+    world/rover                             Transform3D (world <- rover) every tick
+    world/rover/visual                      Boxes3D + Cylinders3D (body, deck, mast, 6 wheels), static
+    world/rover/<camera>/{left,right}       Transform3D (rover <- camera, from T_rover_cam; re-logged only when it
+                                            changes, e.g. navcam mast pointing) + Pinhole (RDF = OpenCV), static
+    world/rover/<camera>/{left,right}/image Image (greyscale, JPEG-compressed by default)
+    world/rover/<camera>/left/depth         DepthImage (uint16 mm, meter=1000) from the disparity map
+    world/rover/<camera>/left/features      Points2D: VO features at the current pixel (inliers green, outliers red)
+    world/rover/<camera>/left/tracks        LineStrips2D: previous -> current pixel of each feature
+    world/points/<name>                     Points3D, world frame (stereo point clouds)
+    world/trajectories/<name>/current       Points3D: the newest position
+    world/trajectories/<name>/path/<k>      LineStrips3D: the polyline so far, in blocks of ``segment_points``
+    world/goodness                          Points3D at GESTALT cell centres, red (0) -> green (1), unknown grey
+    world/arcs/candidates                   LineStrips3D coloured by vote (vetoed arcs dark grey)
+    world/arcs/chosen                       LineStrips3D, the winning arc (cleared when there is none)
+    world/keep_out/<name>                   LineStrips3D circle draped on the terrain, static
+    plots/<key>                             Scalars
+    events                                  TextLog with levels
+
+Timelines: ``sim_time`` (a duration, seconds) and ``step`` (a sequence). Every timed call sets both; a call
+without ``step`` reuses the last step seen.
+
+Per-call cost is kept small for long traverses: static data is sent once; camera intrinsics and extrinsics are
+re-sent only when they change; a trajectory is decimated to ``min_spacing_m`` and split into blocks of at most
+``segment_points`` vertices, so each call re-sends only the open block (completed blocks stay visible, latest-at
+semantics), never the whole polyline.
+
+Reading a recording back (rerun 0.41)::
+
+    from rerun.chunk import RrdReader
+    chunks = RrdReader(path).stream().to_chunks()       # works with or without the RRD footer
+    RrdReader(path).store().summary()                   # needs the footer that close() writes
+
+or :func:`entity_row_counts` below.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+if TYPE_CHECKING:
+    from nav.camera import StereoRig
+    from terrains import Terrain
+
+APPLICATION_ID = "rover-sim"
+TIMELINE_SIM_TIME = "sim_time"
+TIMELINE_STEP = "step"
+
+TERRAIN_MAX_TRIANGLES = 200_000  # finer terrain grids are decimated (Terrain.to_mesh(step=...)) below this
+POINTS_MAX = 50_000  # larger point clouds are subsampled (evenly, deterministic) before logging
+CAMERA_PLANE_DISTANCE_M = 0.25  # how far in front of the camera the viewer draws the image plane / frustum
+LEVELS = ("TRACE", "DEBUG", "INFO", "WARN", "ERROR", "CRITICAL")
+
+_ROCK_RGBA = (120, 104, 92, 255)
+_TRAJECTORY_RGB = {"truth": (245, 245, 245), "dead_reckoning": (255, 150, 0), "vo": (0, 170, 255)}
+_OTHER_RGB = ((200, 80, 255), (80, 220, 120), (255, 80, 120), (255, 230, 60))
+_UNKNOWN_RGBA = (128, 128, 128, 140)
+_VETOED_RGBA = (70, 70, 70, 255)
+_CHOSEN_RGBA = (0, 255, 255, 255)
+_KEEP_OUT_RGBA = (255, 40, 40, 255)
+_INLIER_RGBA = (40, 230, 60, 255)
+_OUTLIER_RGBA = (255, 50, 40, 255)
+_DRAPE_OFFSET_M = 0.03  # lines and points drawn on the ground sit this far above it so they are not z-fought
+
+# Approximate MER rover visual in the rover frame (from models/mer/rover.xml: web, solar deck, mast pole, wheels
+# of radius 0.125 m and width 0.16 m; rover origin 0.525 m above flat ground).
+_BODY_CENTERS = [(0.0, 0.0, 0.03), (-0.02, 0.0, 0.175), (-0.25, 0.85, 0.17), (-0.25, -0.85, 0.17), (0.35, 0.2, 0.55)]
+_BODY_HALF_SIZES = [(0.55, 0.35, 0.13), (0.80, 0.55, 0.012), (0.45, 0.30, 0.01), (0.45, 0.30, 0.01), (0.03, 0.03, 0.36)]
+_BODY_RGBA = [(217, 209, 191, 255), (31, 36, 71, 255), (31, 36, 71, 255), (31, 36, 71, 255), (200, 200, 200, 255)]
+_WHEEL_RADIUS_M = 0.125
+_WHEEL_WIDTH_M = 0.16
+_WHEEL_CENTERS = [(x, y, -0.525 + _WHEEL_RADIUS_M) for x in (0.55, 0.0, -0.55) for y in (0.55, -0.55)]
+
+
+# ------------------------------------------------------------------------------------------------- protocol
+
+
+@runtime_checkable
+class Recorder(Protocol):
+    """What the runner logs. ``RerunRecorder`` writes an ``.rrd``; ``NullRecorder`` does nothing."""
+
+    def log_terrain(self, terrain: Terrain) -> None: ...
+
+    def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None: ...
+
+    def log_camera(self, name: str, rig: StereoRig, t_s: float | None = None) -> None: ...
+
+    def log_stereo_images(
+        self,
+        name: str,
+        t_s: float,
+        step: int | None,
+        left_u8: np.ndarray,
+        right_u8: np.ndarray,
+        disparity_px: np.ndarray | None = None,
+    ) -> None: ...
+
+    def log_points(
+        self, name: str, t_s: float, step: int | None, points_world: np.ndarray, colors: np.ndarray | None = None
+    ) -> None: ...
+
+    def log_trajectory(self, name: str, t_s: float, step: int | None, positions_m: np.ndarray) -> None: ...
+
+    def log_goodness(
+        self,
+        t_s: float,
+        step: int | None,
+        centers_xy: np.ndarray,
+        z: np.ndarray,
+        goodness: np.ndarray,
+        cell_size_m: float,
+    ) -> None: ...
+
+    def log_arcs(
+        self,
+        t_s: float,
+        step: int | None,
+        polylines: Sequence[np.ndarray],
+        votes: Sequence[float | None],
+        chosen: int | None,
+    ) -> None: ...
+
+    def log_vo_features(
+        self,
+        name: str,
+        t_s: float,
+        step: int | None,
+        uv_prev: np.ndarray,
+        uv_cur: np.ndarray,
+        inlier: np.ndarray,
+    ) -> None: ...
+
+    def log_keep_out(self, name: str, x_m: float, y_m: float, radius_m: float, z_m: float) -> None: ...
+
+    def log_scalars(self, t_s: float, step: int | None, values: Mapping[str, float]) -> None: ...
+
+    def log_event(self, t_s: float, step: int | None, text: str, level: str = "INFO") -> None: ...
+
+    def close(self) -> None: ...
+
+
+class NullRecorder:
+    """A recorder that records nothing (kiss-icp ``StubVisualizer``): run without ``if record:`` branches."""
+
+    def log_terrain(self, terrain: Terrain) -> None:
+        pass
+
+    def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None:
+        pass
+
+    def log_camera(self, name: str, rig: StereoRig, t_s: float | None = None) -> None:
+        pass
+
+    def log_stereo_images(
+        self,
+        name: str,
+        t_s: float,
+        step: int | None,
+        left_u8: np.ndarray,
+        right_u8: np.ndarray,
+        disparity_px: np.ndarray | None = None,
+    ) -> None:
+        pass
+
+    def log_points(
+        self, name: str, t_s: float, step: int | None, points_world: np.ndarray, colors: np.ndarray | None = None
+    ) -> None:
+        pass
+
+    def log_trajectory(self, name: str, t_s: float, step: int | None, positions_m: np.ndarray) -> None:
+        pass
+
+    def log_goodness(
+        self,
+        t_s: float,
+        step: int | None,
+        centers_xy: np.ndarray,
+        z: np.ndarray,
+        goodness: np.ndarray,
+        cell_size_m: float,
+    ) -> None:
+        pass
+
+    def log_arcs(
+        self,
+        t_s: float,
+        step: int | None,
+        polylines: Sequence[np.ndarray],
+        votes: Sequence[float | None],
+        chosen: int | None,
+    ) -> None:
+        pass
+
+    def log_vo_features(
+        self,
+        name: str,
+        t_s: float,
+        step: int | None,
+        uv_prev: np.ndarray,
+        uv_cur: np.ndarray,
+        inlier: np.ndarray,
+    ) -> None:
+        pass
+
+    def log_keep_out(self, name: str, x_m: float, y_m: float, radius_m: float, z_m: float) -> None:
+        pass
+
+    def log_scalars(self, t_s: float, step: int | None, values: Mapping[str, float]) -> None:
+        pass
+
+    def log_event(self, t_s: float, step: int | None, text: str, level: str = "INFO") -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self) -> NullRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# ------------------------------------------------------------------------------------------------ blueprint
+
+
+def default_blueprint() -> rrb.Blueprint:
+    """3D world view; navcam/hazcam image views with VO features; time-series tabs for ``plots``; event log."""
+    image_contents = ["+ $origin/image", "+ $origin/features", "+ $origin/tracks"]
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(name="world", origin="world"),
+            rrb.Vertical(
+                rrb.Tabs(
+                    rrb.Spatial2DView(name="navcam left", origin="world/rover/navcam/left", contents=image_contents),
+                    rrb.Spatial2DView(
+                        name="navcam depth", origin="world/rover/navcam/left", contents=["+ $origin/depth"]
+                    ),
+                    rrb.Spatial2DView(
+                        name="hazcam front left", origin="world/rover/hazcam_front/left", contents=image_contents
+                    ),
+                ),
+                rrb.Tabs(
+                    rrb.TimeSeriesView(name="position error", origin="plots/position_error_m"),
+                    rrb.TimeSeriesView(name="slip", origin="plots/slip"),
+                    rrb.TimeSeriesView(name="tilt", origin="plots/tilt_deg"),
+                    rrb.TimeSeriesView(name="VO inliers", origin="plots/vo_inliers"),
+                    rrb.TimeSeriesView(name="all plots", origin="plots"),
+                ),
+                rrb.TextLogView(name="events", origin="events"),
+                row_shares=[3, 2, 1],
+            ),
+            column_shares=[3, 2],
+        ),
+        collapse_panels=True,
+    )
+
+
+# ------------------------------------------------------------------------------------------------- helpers
+
+
+def _ramp_red_green(x: np.ndarray) -> np.ndarray:
+    """``(N, 3)`` uint8 colours: 0 red -> 0.5 yellow -> 1 green (x clipped to [0, 1])."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)[:, None]
+    red, yellow, green = np.array([215, 40, 30.0]), np.array([235, 200, 40.0]), np.array([40, 185, 60.0])
+    lo = red + (yellow - red) * (2.0 * x)
+    hi = yellow + (green - yellow) * (2.0 * x - 1.0)
+    return np.where(x < 0.5, lo, hi).round().astype(np.uint8)
+
+
+def _xyzw(quat_wxyz: np.ndarray) -> np.ndarray:
+    q = np.asarray(quat_wxyz, dtype=np.float64)
+    return np.array([q[1], q[2], q[3], q[0]])
+
+
+def _colour_of(name: str) -> tuple[int, int, int]:
+    if name in _TRAJECTORY_RGB:
+        return _TRAJECTORY_RGB[name]
+    return _OTHER_RGB[sum(map(ord, name)) % len(_OTHER_RGB)]
+
+
+def terrain_mesh_step(nrow: int, ncol: int, max_triangles: int = TERRAIN_MAX_TRIANGLES) -> int:
+    """Smallest ``Terrain.to_mesh`` step that keeps the mesh under ``max_triangles`` triangles."""
+    step = 1
+    while 2 * math.ceil((nrow - 1) / step) * math.ceil((ncol - 1) / step) > max_triangles:
+        step += 1
+    return step
+
+
+@dataclass
+class _PolylineState:
+    """Incremental bookkeeping of one trajectory (see module docstring)."""
+
+    n_in: int = 0  # input points consumed
+    last_in: np.ndarray | None = None  # the last consumed input point, to detect a rewritten history
+    block: int = 0  # index of the open block
+    kept: list[np.ndarray] = field(default_factory=list)  # vertices of the open block
+
+
+# ------------------------------------------------------------------------------------------------- recorder
+
+
+class RerunRecorder:
+    """Writes a traverse to an ``.rrd`` file through its own ``rr.RecordingStream`` (not the global one).
+
+    ``jpeg_quality`` compresses camera images (``None``: raw pixels, about 10x larger). ``min_spacing_m`` and
+    ``segment_points`` bound the trajectory cost (module docstring). Call :meth:`close` (or use ``with``) so
+    the file gets its footer; a file cut short without one is still readable with ``RrdReader(...).stream()``.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        application_id: str = APPLICATION_ID,
+        recording_name: str | None = None,
+        *,
+        recording_id: str | None = None,
+        jpeg_quality: int | None = 90,
+        min_spacing_m: float = 0.02,
+        segment_points: int = 256,
+        max_points: int = POINTS_MAX,
+        blueprint: rrb.Blueprint | None = None,
+    ) -> None:
+        if segment_points < 2:
+            raise ValueError(f"segment_points must be >= 2, got {segment_points}")
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.jpeg_quality = jpeg_quality
+        self.min_spacing_m = float(min_spacing_m)
+        self.segment_points = int(segment_points)
+        self.max_points = int(max_points)
+        self._rec = rr.RecordingStream(application_id, recording_id=recording_id)
+        self._rec.save(self.path, default_blueprint=blueprint or default_blueprint())
+        if recording_name:
+            self._rec.send_recording_name(recording_name)
+        self._closed = False
+        self._t_s = 0.0
+        self._step = 0
+        self._terrain: Terrain | None = None
+        self._rigs: dict[str, StereoRig] = {}
+        self._intrinsics: dict[str, tuple[float, ...]] = {}
+        self._extrinsics: dict[str, np.ndarray] = {}
+        self._tracks: dict[str, _PolylineState] = {}
+        self._log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self._log_rover_visual()
+
+    # -- plumbing --------------------------------------------------------------------------------------------
+
+    def _log(self, path: str, *archetypes: object, static: bool = False) -> None:
+        if self._closed:
+            raise RuntimeError(f"RerunRecorder({self.path}) is closed; create a new recorder to log {path!r}")
+        self._rec.log(path, *archetypes, static=static)  # type: ignore[arg-type]
+
+    def _time(self, t_s: float | None, step: int | None) -> None:
+        if t_s is not None:
+            self._t_s = float(t_s)
+        if step is not None:
+            self._step = int(step)
+        self._rec.set_time(TIMELINE_SIM_TIME, duration=self._t_s)
+        self._rec.set_time(TIMELINE_STEP, sequence=self._step)
+
+    def _log_rover_visual(self) -> None:
+        q = math.sqrt(0.5)
+        self._log(
+            "world/rover/visual",
+            rr.Boxes3D(
+                centers=_BODY_CENTERS,
+                half_sizes=_BODY_HALF_SIZES,
+                colors=_BODY_RGBA,
+                fill_mode=rr.components.FillMode.Solid,
+            ),
+            rr.Cylinders3D(
+                centers=_WHEEL_CENTERS,
+                lengths=[_WHEEL_WIDTH_M] * 6,
+                radii=[_WHEEL_RADIUS_M] * 6,
+                quaternions=[rr.Quaternion(xyzw=[q, 0.0, 0.0, q])] * 6,  # cylinder axis z -> rover y
+                colors=[(60, 60, 60, 255)] * 6,
+                fill_mode=rr.components.FillMode.Solid,
+            ),
+            static=True,
+        )
+
+    # -- static ----------------------------------------------------------------------------------------------
+
+    def log_terrain(self, terrain: Terrain) -> None:
+        """Static ground mesh (material colours) and rock meshes. Keep-out circles drape on it afterwards."""
+        self._terrain = terrain
+        mesh = terrain.to_mesh(step=terrain_mesh_step(terrain.nrow, terrain.ncol), colour_by_material=True)
+        self._log(
+            "world/terrain",
+            rr.Mesh3D(
+                vertex_positions=np.asarray(mesh.vertices, dtype=np.float32),
+                triangle_indices=np.asarray(mesh.faces, dtype=np.uint32),
+                vertex_normals=np.asarray(mesh.vertex_normals, dtype=np.float32),
+                vertex_colors=np.asarray(mesh.visual.vertex_colors, dtype=np.uint8),
+            ),
+            static=True,
+        )
+        if terrain.rocks:
+            vertices, faces, offset = [], [], 0
+            for rock in terrain.rocks:
+                m = rock.mesh()
+                vertices.append(np.asarray(m.vertices))
+                faces.append(np.asarray(m.faces) + offset)
+                offset += len(m.vertices)
+            v = np.concatenate(vertices).astype(np.float32)
+            self._log(
+                "world/terrain/rocks",
+                rr.Mesh3D(
+                    vertex_positions=v,
+                    triangle_indices=np.concatenate(faces).astype(np.uint32),
+                    albedo_factor=_ROCK_RGBA,
+                ),
+                static=True,
+            )
+
+    def log_keep_out(self, name: str, x_m: float, y_m: float, radius_m: float, z_m: float) -> None:
+        """Static circle; draped on the terrain (if logged) else drawn at ``z_m``. Re-logging replaces it."""
+        a = np.linspace(0.0, 2.0 * np.pi, 73)
+        x, y = x_m + radius_m * np.cos(a), y_m + radius_m * np.sin(a)
+        if self._terrain is not None:
+            z = np.asarray(self._terrain.height_at(x, y)) + _DRAPE_OFFSET_M
+        else:
+            z = np.full_like(x, z_m + _DRAPE_OFFSET_M)
+        self._log(
+            f"world/keep_out/{name}",
+            rr.LineStrips3D([np.column_stack([x, y, z])], colors=[_KEEP_OUT_RGBA], radii=[0.02], labels=[name]),
+            static=True,
+        )
+
+    # -- cameras ---------------------------------------------------------------------------------------------
+
+    def log_camera(self, name: str, rig: StereoRig, t_s: float | None = None) -> None:
+        """Pinholes (static, re-sent if the intrinsics change) and rover <- camera extrinsics of both cameras.
+
+        Extrinsics are logged on the timelines at ``t_s`` (default: the latest time logged), and only when
+        ``T_rover_cam`` changed since the last call, so calling this every tick costs a comparison.
+        """
+        self._rigs[name] = rig
+        for side, cam in (("left", rig.left), ("right", rig.right)):
+            path = f"world/rover/{name}/{side}"
+            intr = (cam.width_px, cam.height_px, cam.fx_px, cam.fy_px, cam.cx_px, cam.cy_px)
+            if self._intrinsics.get(path) != intr:
+                self._intrinsics[path] = intr
+                self._log(
+                    path,
+                    rr.Pinhole(
+                        image_from_camera=cam.K,
+                        resolution=[cam.width_px, cam.height_px],
+                        camera_xyz=rr.ViewCoordinates.RDF,
+                        image_plane_distance=CAMERA_PLANE_DISTANCE_M,
+                    ),
+                    static=True,
+                )
+            T = np.asarray(cam.T_rover_cam, dtype=np.float64)
+            last = self._extrinsics.get(path)
+            if last is None or not np.array_equal(last, T):
+                self._extrinsics[path] = T.copy()
+                self._time(t_s, None)
+                self._log(path, rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
+
+    def log_stereo_images(
+        self,
+        name: str,
+        t_s: float,
+        step: int | None,
+        left_u8: np.ndarray,
+        right_u8: np.ndarray,
+        disparity_px: np.ndarray | None = None,
+    ) -> None:
+        """Left/right images under the camera entities; the disparity as a metric ``DepthImage`` under left.
+
+        A disparity map needs the rig (call :meth:`log_camera` first) to turn pixels into metres.
+        """
+        self._time(t_s, step)
+        for side, img in (("left", left_u8), ("right", right_u8)):
+            self._log(f"world/rover/{name}/{side}/image", self._image(img))
+        if disparity_px is not None:
+            rig = self._rigs.get(name)
+            if rig is None:
+                raise ValueError(f"log_stereo_images({name!r}) got a disparity map before log_camera({name!r}, rig)")
+            depth_mm = np.rint(1000.0 * rig.depth_from_disparity(disparity_px))
+            depth_mm[~(depth_mm < 65535.0)] = 0.0  # 0 = no data (NaN, or beyond the 65.5 m a uint16 holds)
+            self._log(f"world/rover/{name}/left/depth", rr.DepthImage(depth_mm.astype(np.uint16), meter=1000.0))
+
+    def _image(self, img: np.ndarray) -> rr.Image | rr.EncodedImage:
+        a = np.asarray(img)
+        if a.dtype != np.uint8:
+            a = np.clip(a, 0, 255).astype(np.uint8)
+        image = rr.Image(a, color_model="L" if a.ndim == 2 else "RGB")
+        return image if self.jpeg_quality is None else image.compress(jpeg_quality=self.jpeg_quality)
+
+    def log_vo_features(
+        self,
+        name: str,
+        t_s: float,
+        step: int | None,
+        uv_prev: np.ndarray,
+        uv_cur: np.ndarray,
+        inlier: np.ndarray,
+    ) -> None:
+        """VO features on the left image at their current pixel, and their track from the previous pixel."""
+        self._time(t_s, step)
+        prev = np.asarray(uv_prev, dtype=np.float32).reshape(-1, 2)
+        cur = np.asarray(uv_cur, dtype=np.float32).reshape(-1, 2)
+        ok = np.asarray(inlier, dtype=bool).reshape(-1)
+        valid = np.isfinite(cur).all(axis=1)
+        colors = np.where(ok[:, None], np.array(_INLIER_RGBA), np.array(_OUTLIER_RGBA)).astype(np.uint8)
+        base = f"world/rover/{name}/left"
+        self._log(f"{base}/features", rr.Points2D(cur[valid], colors=colors[valid], radii=[2.0]))
+        tracked = valid & np.isfinite(prev).all(axis=1)
+        self._log(
+            f"{base}/tracks",
+            rr.LineStrips2D(np.stack([prev[tracked], cur[tracked]], axis=1), colors=colors[tracked], radii=[0.75]),
+        )
+
+    # -- world -----------------------------------------------------------------------------------------------
+
+    def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None:
+        """world <- rover transform (translation + quaternion)."""
+        self._time(t_s, step)
+        self._log(
+            "world/rover",
+            rr.Transform3D(translation=np.asarray(position_m, dtype=np.float64), quaternion=_xyzw(quat_wxyz)),
+        )
+
+    def log_points(
+        self, name: str, t_s: float, step: int | None, points_world: np.ndarray, colors: np.ndarray | None = None
+    ) -> None:
+        """World-frame point cloud at ``world/points/<name>``; non-finite points dropped, large clouds thinned."""
+        self._time(t_s, step)
+        p = np.asarray(points_world, dtype=np.float32).reshape(-1, 3)
+        keep = np.isfinite(p).all(axis=1)
+        idx = np.flatnonzero(keep)
+        if len(idx) > self.max_points:
+            idx = idx[np.linspace(0, len(idx) - 1, self.max_points).astype(np.intp)]
+        c = None if colors is None else np.asarray(colors)[idx]
+        self._log(f"world/points/{name}", rr.Points3D(p[idx], colors=c, radii=[0.01]))
+
+    def log_trajectory(self, name: str, t_s: float, step: int | None, positions_m: np.ndarray) -> None:
+        """The trajectory so far (pass the whole history each time; only what is new is processed and sent)."""
+        p = np.asarray(positions_m, dtype=np.float64).reshape(-1, 3)
+        if len(p) == 0:
+            return
+        self._time(t_s, step)
+        base = f"world/trajectories/{name}"
+        st = self._tracks.get(name)
+        rewritten = st is not None and (
+            st.n_in > len(p) or not np.array_equal(p[st.n_in - 1], st.last_in, equal_nan=True)
+        )
+        if st is None or rewritten:
+            if st is not None:  # history was rewritten: start over
+                self._log(f"{base}/path", rr.Clear(recursive=True))
+            st = self._tracks[name] = _PolylineState()
+        rgb = _colour_of(name)
+        changed = False
+        min2 = self.min_spacing_m**2
+        for q in p[st.n_in :]:
+            if not np.isfinite(q).all():
+                continue
+            if st.kept and float(np.sum((q - st.kept[-1]) ** 2)) < min2:
+                continue
+            st.kept.append(q)
+            changed = True
+            if len(st.kept) >= self.segment_points:  # close this block, open the next at its last vertex
+                self._log(f"{base}/path/{st.block:05d}", rr.LineStrips3D([np.asarray(st.kept)], colors=[rgb]))
+                st.block += 1
+                st.kept = [q]
+                changed = False
+        st.n_in, st.last_in = len(p), p[-1].copy()
+        if changed and len(st.kept) >= 2:
+            self._log(f"{base}/path/{st.block:05d}", rr.LineStrips3D([np.asarray(st.kept)], colors=[rgb]))
+        current = st.kept[-1] if st.kept else None
+        if np.isfinite(p[-1]).all():
+            current = p[-1]
+        if current is not None:
+            self._log(f"{base}/current", rr.Points3D([current], colors=[rgb], radii=[0.05], labels=[name]))
+
+    def log_goodness(
+        self,
+        t_s: float,
+        step: int | None,
+        centers_xy: np.ndarray,
+        z: np.ndarray,
+        goodness: np.ndarray,
+        cell_size_m: float,
+    ) -> None:
+        """GESTALT goodness map: a point per cell, red (0) -> green (1), grey where unknown (NaN)."""
+        self._time(t_s, step)
+        xy = np.asarray(centers_xy, dtype=np.float64).reshape(-1, 2)
+        g = np.asarray(goodness, dtype=np.float64).reshape(-1)
+        zz = np.asarray(z, dtype=np.float64).reshape(-1)
+        known = np.isfinite(g)
+        colors = np.empty((len(g), 4), dtype=np.uint8)
+        colors[:] = _UNKNOWN_RGBA
+        colors[known, :3] = _ramp_red_green(g[known])
+        colors[known, 3] = 255
+        zz = np.where(np.isfinite(zz), zz, 0.0) + _DRAPE_OFFSET_M
+        self._log(
+            "world/goodness",
+            rr.Points3D(np.column_stack([xy, zz]).astype(np.float32), colors=colors, radii=[0.35 * cell_size_m]),
+        )
+
+    def log_arcs(
+        self,
+        t_s: float,
+        step: int | None,
+        polylines: Sequence[np.ndarray],
+        votes: Sequence[float | None],
+        chosen: int | None,
+    ) -> None:
+        """Candidate arcs coloured by vote (normalised by the best vote; ``None`` = vetoed), the winner apart."""
+        if len(polylines) != len(votes):
+            raise ValueError(f"log_arcs: {len(polylines)} polylines but {len(votes)} votes")
+        self._time(t_s, step)
+        v = np.array([np.nan if x is None else float(x) for x in votes], dtype=np.float64)
+        finite = np.isfinite(v)
+        top = float(np.max(v[finite])) if finite.any() else 0.0
+        colors = np.empty((len(v), 4), dtype=np.uint8)
+        colors[:] = _VETOED_RGBA
+        if finite.any():
+            colors[finite, :3] = _ramp_red_green(v[finite] / top if top > 0 else np.zeros(finite.sum()))
+            colors[finite, 3] = 255
+        strips = [np.asarray(s, dtype=np.float32).reshape(-1, 3) for s in polylines]
+        self._log("world/arcs/candidates", rr.LineStrips3D(strips, colors=colors, radii=[0.01]))
+        if chosen is None:
+            self._log("world/arcs/chosen", rr.Clear(recursive=False))
+        else:
+            self._log("world/arcs/chosen", rr.LineStrips3D([strips[chosen]], colors=[_CHOSEN_RGBA], radii=[0.03]))
+
+    # -- plots and events ------------------------------------------------------------------------------------
+
+    def log_scalars(self, t_s: float, step: int | None, values: Mapping[str, float]) -> None:
+        """One ``Scalars`` per key at ``plots/<key>`` (``/`` in a key nests); non-finite values are skipped."""
+        self._time(t_s, step)
+        for key, value in values.items():
+            x = float(value)
+            if math.isfinite(x):
+                self._log(f"plots/{key}", rr.Scalars(x))
+
+    def log_event(self, t_s: float, step: int | None, text: str, level: str = "INFO") -> None:
+        """A line in the ``events`` log; ``level`` is one of :data:`LEVELS` (``WARNING`` = ``WARN``)."""
+        lvl = level.upper()
+        lvl = "WARN" if lvl == "WARNING" else lvl
+        if lvl not in LEVELS:
+            raise ValueError(f"log_event level {level!r}: use one of {LEVELS}")
+        self._time(t_s, step)
+        self._log("events", rr.TextLog(text, level=lvl))
+
+    # -- lifetime --------------------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Flush and close the file (writes the RRD footer). Safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._rec.flush()
+        finally:
+            self._rec.disconnect()
+
+    def __enter__(self) -> RerunRecorder:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+# ------------------------------------------------------------------------------------------------- reading
+
+
+def entity_row_counts(path: str | Path) -> dict[str, int]:
+    """Rows per entity path (static and temporal together) of an ``.rrd``, with or without its footer.
+
+    Entity paths come back with a leading ``/`` (``"/world/rover"``); the recording's ``/__properties`` are
+    included.
+    """
+    from rerun.chunk import RrdReader
+
+    counts: dict[str, int] = {}
+    for chunk in RrdReader(Path(path)).stream().to_chunks():
+        counts[chunk.entity_path] = counts.get(chunk.entity_path, 0) + chunk.num_rows
+    return counts

@@ -1,0 +1,241 @@
+"""Scenario files: one TOML schema, validated on load with errors naming the file, the field and the allowed range.
+
+A scenario is the terrain recipe, the sun, the rover's start pose, the command sequence as MER was commanded
+(blind drives, arcs, turns, VO-corrected goto, autonav to a waypoint, mast pointing), keep-out zones and a slip
+limit, the navigation configuration, and the pass criterion. ``--set dotted.key=value`` overrides any field.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from rover_sim.errors import ConfigError
+from terrains import TerrainRecipe
+
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+
+
+class _Spec(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, validate_default=True)
+
+
+class SunSpec(_Spec):
+    azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0, description="From +x (east) toward +y (north).")
+    elevation_deg: float = Field(45.0, ge=2.0, le=90.0, description="Above the horizon.")
+    shadows: bool = True
+
+
+class StartSpec(_Spec):
+    x_m: float = Field(0.0, ge=-1.0e4, le=1.0e4)
+    y_m: float = Field(0.0, ge=-1.0e4, le=1.0e4)
+    yaw_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Heading from +x toward +y.")
+
+
+class NavSpec(_Spec):
+    vo: bool = Field(True, description="Visual odometry on (MER used it on slopes and in sand).")
+    vo_step_m: float = Field(0.35, gt=0.05, le=0.75, description="Drive between VO images (MER: <= 75 cm).")
+    camera: Literal["navcam", "hazcam_front"] = "navcam"
+    resolution_px: int = Field(256, ge=64, le=1024, description="Navigation image size (MER binned to 256).")
+    mast_pan_deg: float = Field(0.0, ge=-180.0, le=180.0)
+    mast_tilt_deg: float = Field(-40.0, ge=-85.0, le=70.0, description="Navcam tilt; negative looks down.")
+    speed_m_s: float = Field(0.0375, gt=0.0, le=0.05, description="Wheel speed (MER peak 5 cm/s).")
+    slip_limit: float | None = Field(
+        None, gt=0.0, le=2.0, description="Halt when a VO step measures more slip than this (MER: 0.4)."
+    )
+    image_noise: bool = True
+
+
+class DriveCmd(_Spec):
+    """Blind straight drive: ends when the wheels have turned ``distance_m``."""
+
+    type: Literal["drive"]
+    distance_m: float = Field(ge=-50.0, le=50.0)
+
+
+class ArcCmd(_Spec):
+    type: Literal["arc"]
+    radius_m: float = Field(ge=-1000.0, le=1000.0, description="> 0 turns left; |radius| >= 0.3 m.")
+    distance_m: float = Field(ge=-50.0, le=50.0)
+
+    @model_validator(mode="after")
+    def _radius(self) -> ArcCmd:
+        if abs(self.radius_m) < 0.3:
+            raise ValueError("|radius_m| must be >= 0.3 m (use a turn command for a point turn)")
+        return self
+
+
+class TurnCmd(_Spec):
+    type: Literal["turn"]
+    angle_deg: float = Field(ge=-360.0, le=360.0)
+
+
+class GotoCmd(_Spec):
+    """Drive to a point using the onboard (VO-corrected if VO is on) pose, in steps of ``nav.vo_step_m``."""
+
+    type: Literal["goto"]
+    x_m: float = Field(ge=-1.0e4, le=1.0e4)
+    y_m: float = Field(ge=-1.0e4, le=1.0e4)
+    tolerance_m: float = Field(0.2, gt=0.0, le=10.0)
+    max_distance_m: float = Field(60.0, gt=0.0, le=500.0, description="Commanded-travel budget before giving up.")
+
+
+class AutonavCmd(_Spec):
+    """GESTALT autonomous navigation to a waypoint."""
+
+    type: Literal["autonav"]
+    x_m: float = Field(ge=-1.0e4, le=1.0e4)
+    y_m: float = Field(ge=-1.0e4, le=1.0e4)
+    tolerance_m: float = Field(1.0, gt=0.0, le=10.0)
+    step_m: float = Field(0.5, ge=0.35, le=1.0, description="Drive per GESTALT cycle (MER: 35 cm to 1 m).")
+    max_cycles: int = Field(120, ge=1, le=2000)
+
+
+class MastCmd(_Spec):
+    type: Literal["mast"]
+    pan_deg: float = Field(ge=-180.0, le=180.0)
+    tilt_deg: float = Field(ge=-85.0, le=70.0)
+
+
+Command = Annotated[DriveCmd | ArcCmd | TurnCmd | GotoCmd | AutonavCmd | MastCmd, Field(discriminator="type")]
+
+
+class KeepOut(_Spec):
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9_\-]+$")
+    x_m: float = Field(ge=-1.0e4, le=1.0e4)
+    y_m: float = Field(ge=-1.0e4, le=1.0e4)
+    radius_m: float = Field(gt=0.0, le=100.0, description="Halt when the onboard pose comes this close.")
+
+
+class PassSpec(_Spec):
+    """The scenario's pass criterion; every set bound must hold."""
+
+    max_vo_error_pct: float | None = Field(None, gt=0.0, le=100.0)
+    min_dr_error_pct: float | None = Field(None, ge=0.0, le=1000.0)
+    max_dr_error_pct: float | None = Field(None, gt=0.0, le=1000.0)
+    min_vo_convergence_pct: float | None = Field(None, ge=0.0, le=100.0)
+    min_max_slip_pct: float | None = Field(None, ge=0.0, le=500.0)
+    max_max_slip_pct: float | None = Field(None, ge=0.0, le=500.0)
+    max_false_positives: int | None = Field(None, ge=0, le=1000)
+    expect_halt: Literal["keep_out", "slip_limit"] | None = None
+    goal_within_m: float | None = Field(None, gt=0.0, le=100.0, description="Truth within this of the last goal.")
+    max_body_collisions: int | None = Field(None, ge=0, le=1000)
+
+
+class PhysicsSpec(_Spec):
+    timestep_s: float = Field(0.005, ge=0.0005, le=0.01)
+
+
+class Scenario(_Spec):
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[a-z0-9_]+$")
+    description: str = ""
+    seed: int = Field(0, ge=0, le=2**31 - 1)
+    terrain: TerrainRecipe = Field(default_factory=TerrainRecipe)
+    sun: SunSpec = Field(default_factory=SunSpec)
+    start: StartSpec = Field(default_factory=StartSpec)
+    nav: NavSpec = Field(default_factory=NavSpec)
+    commands: list[Command] = Field(min_length=1, max_length=500)
+    keep_out: list[KeepOut] = Field(default_factory=list)
+    passing: PassSpec = Field(default_factory=PassSpec, alias="pass")
+    physics: PhysicsSpec = Field(default_factory=PhysicsSpec)
+    fast: bool = Field(False, description="Part of the fast CI suite.")
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)
+
+    @model_validator(mode="after")
+    def _start_on_patch(self) -> Scenario:
+        nrow, ncol = self.terrain.grid_shape
+        half_x = (ncol - 1) * self.terrain.cell_size_m / 2 - 1.0
+        half_y = (nrow - 1) * self.terrain.cell_size_m / 2 - 1.0
+        if abs(self.start.x_m) > half_x or abs(self.start.y_m) > half_y:
+            raise ValueError(
+                f"start ({self.start.x_m}, {self.start.y_m}) must be at least 1 m inside the terrain "
+                f"(|x| <= {half_x:.1f}, |y| <= {half_y:.1f})"
+            )
+        return self
+
+    def resolved_dict(self) -> dict[str, Any]:
+        return json.loads(self.model_dump_json(by_alias=True))
+
+
+def _set_dotted(tree: dict, dotted: str, value: Any) -> None:
+    keys = dotted.split(".")
+    node = tree
+    for k in keys[:-1]:
+        if isinstance(node, list):
+            node = node[int(k)]
+            continue
+        node = node.setdefault(k, {})
+        if not isinstance(node, dict | list):
+            raise ConfigError("--set", dotted, f"'{k}' is a value, not a table")
+    last = keys[-1]
+    if isinstance(node, list):
+        node[int(last)] = value
+    else:
+        node[last] = value
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``a.b=1.5`` -> ("a.b", 1.5); the value is parsed as TOML (numbers, booleans, strings, arrays)."""
+    if "=" not in text:
+        raise ConfigError("--set", text, "expected dotted.key=value")
+    key, raw = text.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw  # a bare string
+    return key.strip(), value
+
+
+def _describe(err: ValidationError) -> tuple[str, str]:
+    first = err.errors()[0]
+    loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
+    msg = first["msg"]
+    ctx = first.get("ctx") or {}
+    bounds = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("ge", "gt", "le", "lt", "expected"))
+    if bounds:
+        msg = f"{msg} (allowed: {bounds})"
+    if first.get("input") is not None and not isinstance(first.get("input"), dict | list):
+        msg = f"{msg}; got {first['input']!r}"
+    more = len(err.errors()) - 1
+    if more:
+        msg += f" (+{more} more problem{'s' if more > 1 else ''})"
+    return loc, msg
+
+
+def scenario_from_dict(data: dict, source: str = "<dict>", overrides: list[str] | None = None) -> Scenario:
+    tree = json.loads(json.dumps(data))  # deep copy of plain data
+    for text in overrides or []:
+        key, value = parse_override(text)
+        _set_dotted(tree, key, value)
+    try:
+        return Scenario.model_validate(tree)
+    except ValidationError as err:
+        loc, msg = _describe(err)
+        raise ConfigError(source, loc, msg) from None
+
+
+def load_scenario(name_or_path: str | Path, overrides: list[str] | None = None, seed: int | None = None) -> Scenario:
+    """Load ``scenarios/<name>.toml`` or a path; apply ``--set`` overrides and ``--seed``."""
+    path = Path(name_or_path)
+    if not path.suffix:
+        path = SCENARIOS_DIR / f"{name_or_path}.toml"
+    if not path.is_file():
+        known = ", ".join(sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")))
+        raise ConfigError(str(path), "(file)", f"no such scenario file; known scenarios: {known}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ConfigError(str(path), "(syntax)", f"not valid TOML: {err}") from None
+    extra = list(overrides or [])
+    if seed is not None:
+        extra.append(f"seed={seed}")
+    return scenario_from_dict(data, str(path), extra)
+
+
+def catalogue() -> list[str]:
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
