@@ -44,6 +44,42 @@ def bench_slip(json: JsonOpt = None, seed: int = 0) -> None:
         raise typer.Exit(code=1)
 
 
+SetOpt = Annotated[list[str] | None, typer.Option("--set", help="Override a scenario field: dotted.key=value.")]
+
+
+@app.command("run")
+def run_cmd(
+    scenario: Annotated[str, typer.Argument(help="Scenario name (scenarios/<name>.toml) or path to a TOML file.")],
+    out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("runs/latest"),
+    seed: Annotated[int | None, typer.Option("--seed", help="Override the scenario seed.")] = None,
+    set_: SetOpt = None,
+    record: Annotated[bool, typer.Option("--record/--no-record", help="Write DIR/recording.rrd.")] = True,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress")] = True,
+) -> None:
+    """Run a mission scenario: writes recording.rrd, metrics.json, trajectories/*.tum, plots/*.png."""
+    from rover_sim.runner import run_scenario
+
+    try:
+        metrics = run_scenario(scenario, out, seed=seed, overrides=set_ or [], record=record, progress=progress)
+    except RoverSimError as e:
+        _fail(e)
+    colour = typer.colors.GREEN if metrics.passed else typer.colors.RED
+    typer.secho(f"{metrics.scenario}: {'PASS' if metrics.passed else 'FAIL'} ({metrics.reason})", fg=colour)
+    typer.echo(
+        f"distance {metrics.distance_m:.2f} m | DR error {metrics.dr_error_pct:.2f} % | VO error "
+        f"{metrics.vo_error_pct} % | VO convergence {metrics.vo_convergence_pct} % | max slip {metrics.max_slip_pct} %"
+    )
+    typer.echo(f"outputs in {out}/ ; open the recording with: rerun {out}/recording.rrd")
+    if not metrics.passed:
+        raise typer.Exit(code=1)
+
+
+@app.command("demo")
+def demo_cmd(out: Annotated[Path, typer.Option("--out")] = Path("runs/demo")) -> None:
+    """The main job: the Wopmay scenario with a rerun recording, metrics and plots."""
+    run_cmd("wopmay", out=out, seed=None, set_=None, record=True, progress=True)
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -116,6 +117,10 @@ class RoverSim:
         self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
         self._inv_cell = 1.0 / terrain.cell_size_m
         self.wheel_ref_rad = np.zeros(6)
+        self._wheel_free = np.ones(6)  # 0 for a locked (held, dragged) wheel
+        self._substep_hook: Callable[[RoverSim], None] | None = None
+        self._substep_every = 1
+        self._substep_count = 0
         self.reset()
 
     # ------------------------------------------------------------------ setup
@@ -155,11 +160,19 @@ class RoverSim:
         self.wheel_ref_rad[:] = self.data.qpos[self._wheel_qadr]
         self._ctrl[self._wheel_act] = self.wheel_ref_rad
 
+    def lock_wheels(self, names: list[str]) -> None:
+        """Hold these wheels (WHEELS names) whatever the drive command: they are dragged (a failed motor)."""
+        self._wheel_free = np.array([0.0 if w in names else 1.0 for w in WHEELS])
+
     def set_steering_rad(self, angles_rad: np.ndarray) -> None:
         self._ctrl[self._steer_act] = angles_rad
 
     def set_mast(self, pan_rad: float, tilt_rad: float) -> None:
         self._ctrl[self._mast_act] = [pan_rad, tilt_rad]
+
+    def set_substep_hook(self, hook: Callable[[RoverSim], None] | None, every_n_steps: int = 1) -> None:
+        """Call ``hook(sim)`` after every ``every_n_steps`` physics steps (e.g. IMU sampling at 200 Hz)."""
+        self._substep_hook, self._substep_every, self._substep_count = hook, max(1, int(every_n_steps)), 0
 
     # ------------------------------------------------------------------ stepping
     def step(self, wheel_rate_rad_s: np.ndarray | None = None, n_steps: int = 1) -> None:
@@ -167,7 +180,7 @@ class RoverSim:
         m, d = self.model, self.data
         dt = m.opt.timestep
         ctrl_wheels = self._ctrl[self._wheel_act[0] : self._wheel_act[0] + 6]
-        increment = None if wheel_rate_rad_s is None else np.asarray(wheel_rate_rad_s, dtype=float) * dt
+        increment = None if wheel_rate_rad_s is None else np.asarray(wheel_rate_rad_s, dtype=float) * dt * self._wheel_free
         for _ in range(n_steps):
             if increment is not None:
                 self.wheel_ref_rad += increment
@@ -175,6 +188,11 @@ class RoverSim:
             if self.soil_law_enabled:
                 self._apply_soil_law(dt)
             mujoco.mj_step(m, d)
+            if self._substep_hook is not None:
+                self._substep_count += 1
+                if self._substep_count >= self._substep_every:
+                    self._substep_count = 0
+                    self._substep_hook(self)
         self._check_divergence()
 
     def step_for(self, duration_s: float, wheel_rate_rad_s: np.ndarray | None = None) -> None:

@@ -30,6 +30,14 @@ class SunSpec(_Spec):
     shadows: bool = True
 
 
+class AppearanceSpec(_Spec):
+    """Ground albedo: ``fine_soil`` makes sand nearly featureless (Meridiani plains) to starve stereo and VO."""
+
+    fine_soil: bool = False
+    contrast: float = Field(1.0, gt=0.0, le=3.0, description="Albedo contrast multiplier.")
+    texture_px_per_m: float = Field(100.0, ge=10.0, le=200.0, description="Texels per metre (capped by GL size).")
+
+
 class StartSpec(_Spec):
     x_m: float = Field(0.0, ge=-1.0e4, le=1.0e4)
     y_m: float = Field(0.0, ge=-1.0e4, le=1.0e4)
@@ -42,12 +50,20 @@ class NavSpec(_Spec):
     camera: Literal["navcam", "hazcam_front"] = "navcam"
     resolution_px: int = Field(256, ge=64, le=1024, description="Navigation image size (MER binned to 256).")
     mast_pan_deg: float = Field(0.0, ge=-180.0, le=180.0)
-    mast_tilt_deg: float = Field(-40.0, ge=-85.0, le=70.0, description="Navcam tilt; negative looks down.")
+    mast_tilt_deg: float = Field(
+        -40.0, ge=-70.0, le=85.0, description="Navcam elevation: negative looks down (joint range -74..+86 deg)."
+    )
     speed_m_s: float = Field(0.0375, gt=0.0, le=0.05, description="Wheel speed (MER peak 5 cm/s).")
     slip_limit: float | None = Field(
         None, gt=0.0, le=2.0, description="Halt when a VO step measures more slip than this (MER: 0.4)."
     )
     image_noise: bool = True
+
+
+class FaultSpec(_Spec):
+    """Hardware faults: a locked wheel is held by its drive and dragged (Spirit's right front, Sol 170 on)."""
+
+    locked_wheels: list[Literal["lf", "lm", "lr", "rf", "rm", "rr"]] = Field(default_factory=list, max_length=6)
 
 
 class DriveCmd(_Spec):
@@ -98,7 +114,7 @@ class AutonavCmd(_Spec):
 class MastCmd(_Spec):
     type: Literal["mast"]
     pan_deg: float = Field(ge=-180.0, le=180.0)
-    tilt_deg: float = Field(ge=-85.0, le=70.0)
+    tilt_deg: float = Field(ge=-70.0, le=85.0, description="Elevation: negative looks down.")
 
 
 Command = Annotated[DriveCmd | ArcCmd | TurnCmd | GotoCmd | AutonavCmd | MastCmd, Field(discriminator="type")]
@@ -136,10 +152,12 @@ class Scenario(_Spec):
     seed: int = Field(0, ge=0, le=2**31 - 1)
     terrain: TerrainRecipe = Field(default_factory=TerrainRecipe)
     sun: SunSpec = Field(default_factory=SunSpec)
+    appearance: AppearanceSpec = Field(default_factory=AppearanceSpec)
     start: StartSpec = Field(default_factory=StartSpec)
     nav: NavSpec = Field(default_factory=NavSpec)
     commands: list[Command] = Field(min_length=1, max_length=500)
     keep_out: list[KeepOut] = Field(default_factory=list)
+    faults: FaultSpec = Field(default_factory=FaultSpec)
     passing: PassSpec = Field(default_factory=PassSpec, alias="pass")
     physics: PhysicsSpec = Field(default_factory=PhysicsSpec)
     fast: bool = Field(False, description="Part of the fast CI suite.")

@@ -53,7 +53,8 @@ def build_spec(
     """Scene spec with the terrain's heightfield, one mesh geom per rock and the sun.
 
     ``texture_rgb`` (H, W, 3) uint8, if given, is draped over the whole terrain (``texture_size_m`` per repeat,
-    default the terrain's extent), so the albedo is world-fixed as stereo and VO require.
+    default the terrain's extent), so the albedo is world-fixed as stereo and VO require. It follows the
+    ``terrains.albedo_texture`` layout: row 0 is the south edge (smallest y), column 0 the west edge (smallest x).
     """
     sun = sun or Sun()
     spec = mujoco.MjSpec.from_file(str(SCENE_XML))
@@ -70,7 +71,8 @@ def build_spec(
         h, w, _ = texture_rgb.shape
         tex.builtin = mujoco.mjtBuiltin.mjBUILTIN_NONE
         tex.width, tex.height, tex.nchannel = w, h, 3
-        tex.data = np.ascontiguousarray(texture_rgb, dtype=np.uint8).tobytes()
+        # MuJoCo's hfield texture mapping puts the first data row at +y (north): flip so row 0 lies south.
+        tex.data = np.ascontiguousarray(texture_rgb[::-1], dtype=np.uint8).tobytes()
         mat = spec.material("terrain")
         rep = (texture_size_m or 2 * terrain.half_x_m, texture_size_m or 2 * terrain.half_y_m)
         mat.texrepeat = [2 * terrain.half_x_m / rep[0], 2 * terrain.half_y_m / rep[1]]

@@ -1,0 +1,624 @@
+"""Offscreen rendering of the rover's stereo cameras: greyscale images, depth and segmentation ground truth.
+
+MER cameras were 1024x1024 12-bit greyscale; navigation used 256x256 images binned (averaged) 4x4. The
+:class:`StereoRenderer` offers both reductions (:attr:`RenderConfig.binning`):
+
+* ``binning=1`` (default): render directly at 256x256. About 16x fewer fragments; texture detail is averaged by
+  GL mipmapping instead of by the detector, and polygon edges are point-sampled (one sample per pixel, or
+  ``multisamples`` of them), so edges alias slightly more than a real binned sensor. The fast choice for
+  navigation runs.
+* ``binning=4``: render 1024x1024 and average 4x4 blocks, as the MER flight cameras did: correct pixel-area
+  integration of texture and edges, but 4-5x slower on a software rasteriser.
+
+Speed (llvmpipe: Mesa's CPU rasteriser, vertex processing single-threaded): cost is dominated by the terrain's
+triangle count times the number of passes (one ambient pass, one shadow-map pass and one sunlit pass when shadows
+are on). So the renderer draws the terrain from a *render model* (the physics model plus render-only terrain tiles,
+``terrain_tile_*`` meshes of about 1.6 m square, with world-fixed texture coordinates) and, for every pair, hides
+the tiles and rocks that cannot appear in either camera or cast a shadow into it. The physics model is never
+modified: the render model's state is copied from ``sim.data`` before each render. The shadow map covers a square
+``2 * shadow_half_extent_m`` wide (perpendicular to the sunlight) in front of the cameras, and the sun light is
+moved with the cameras so it always covers the view.
+
+Lighting: the sun (directional, diffuse ``sun_intensity``, casts shadows) plus a uniform sky term
+(``sky_ambient``, the MuJoCo headlight's ambient part; its diffuse part is off so nothing is lit from the camera).
+Shadows are therefore ``sky_ambient / (sky_ambient + sun_intensity * cos(incidence))`` as bright as lit ground.
+
+Pixel values: luminance ``Y = 0.299 R + 0.587 G + 0.114 B`` of the rendered RGB; with :class:`ImageNoise`, Gaussian
+read noise is added in 12-bit counts, the signal is quantised to 12 bits (0-4095) and then scaled to 8 bits
+(MER downlinked 12-bit images; the navigation software used 8-bit ones).
+
+GL: ``MUJOCO_GL=egl`` (set by ``rover_sim/__init__``); each :class:`mujoco.Renderer` owns one EGL context.
+Never ``fork()`` a process after a context exists (spawn workers instead).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from functools import cache
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from nav.camera import PinholeCamera, StereoRig
+from rover_sim.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
+from rover_sim.errors import RenderingUnavailable
+from rover_sim.world import ROCK_GEOM_PREFIX
+
+if TYPE_CHECKING:
+    from rover_sim.physics import RoverSim
+    from terrains import Terrain
+
+LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)  # Rec. 601 luminance of RGB
+DN12_MAX = 4095  # 12-bit camera counts
+MAX_TEXTURE_PX = 16384  # largest texture side llvmpipe (and most GPUs) accept
+TILE_PREFIX = "terrain_tile_"
+TILE_MATERIAL = "terrain_tile"
+ROCK_MATERIAL = "rock_textured"
+ROCK_TEXTURE = "rock_speckle"
+ROCK_TEXTURE_PX = 128
+ROCK_TEXTURE_SCALE_M = 0.3  # one repeat of the rock speckle texture spans this many metres
+ROCK_TEXTURE_SLANT = 0.6  # texcoords use x + 0.6 z and y + 0.6 z so steep rock sides are not stretched
+ROCK_TINT_RGB = (0.82, 0.70, 0.60)  # dust-coated basalt: greyer than the butterscotch soil
+ROCK_SPECKLE_CONTRAST = 0.18  # std of the rock speckle texture, relative
+GROUP_SHOWN = 1  # render-only geoms that are drawn
+GROUP_HIDDEN = 5  # render-only geoms culled for this frame; also the physics hfield (drawn as tiles instead)
+SUN_DISTANCE_MARGIN_M = 20.0  # the shadow camera sits this far beyond the scene along the sunlight
+NO_HIT_DEPTH_FRACTION = 0.99  # depth at or beyond this fraction of zfar (1500 m) is sky: returned as inf
+
+
+@dataclass(frozen=True)
+class ImageNoise:
+    """Sensor noise: Gaussian read noise in 12-bit counts, then 12-bit quantisation, then scaling to 8 bits."""
+
+    read_noise_dn12: float = 3.0  # rms counts of a 0..4095 signal (about 0.19 grey levels of 8 bits)
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """How images are rendered. Defaults: fast navigation images (direct 256x256, shadows on)."""
+
+    resolution_px: int = 256  # output image side (square images)
+    binning: int = 1  # 1: render at resolution_px; 4: render 4x larger and average 4x4 blocks (MER style)
+    shadows: bool = True
+    shadow_map_px: int = 2048  # shadow-map side; with the 16 m wide shadow box: 8 mm per texel (1024: 20 % faster)
+    shadow_half_extent_m: float = 8.0  # half width of the shadowed square (perpendicular to the sunlight)
+    builtin_slices: int = 12  # tessellation of the rover's cylinders/capsules (MuJoCo default 28: 4x the triangles)
+    builtin_stacks: int = 4  # (MuJoCo default 16)
+    multisamples: int = 0  # MSAA samples per pixel (0 = off; 4 costs about 25 % more at 256x256)
+    skybox: bool = True  # draw the sky gradient where no terrain is seen (cheap)
+    terrain_tile_m: float = 1.6  # side of the render-only terrain tiles (culling and level-of-detail unit)
+    max_terrain_tiles: int = 2500  # larger terrains get larger tiles
+    cull: bool = True  # hide terrain tiles and rocks outside both cameras' view (and their shadow volume)
+    lod: bool = True  # draw distant tiles coarser while their height error stays under lod_tolerance_px
+    lod_tolerance_px: float = 0.25  # largest height error of a tile level, in pixels at the tile's distance
+    sun_intensity: float = 1.3  # diffuse strength of the sun (above 1: exposure gain; GL clamps per channel)
+    sky_ambient: float = 0.5  # uniform ambient light standing in for the dusty sky
+    noise: ImageNoise | None = None
+
+    def __post_init__(self) -> None:
+        if self.resolution_px < 8 or self.binning < 1:
+            raise ValueError(f"resolution_px must be >= 8 and binning >= 1, got {self.resolution_px}, {self.binning}")
+        if self.shadow_half_extent_m <= 0 or self.terrain_tile_m <= 0:
+            raise ValueError("shadow_half_extent_m and terrain_tile_m must be positive")
+
+    @property
+    def native_px(self) -> int:
+        """Side of the image actually rasterised (before binning)."""
+        return self.resolution_px * self.binning
+
+
+@dataclass(frozen=True)
+class StereoFrame:
+    """One rendered stereo pair: 8-bit greyscale images and the rig (intrinsics/extrinsics) at capture time."""
+
+    t_s: float
+    rig: StereoRig
+    left: np.ndarray  # (H, W) uint8
+    right: np.ndarray  # (H, W) uint8
+    meta: dict = field(default_factory=dict)
+
+
+# ----------------------------------------------------------------------------------------------- GL checks
+
+
+@cache
+def check_gl() -> None:
+    """Fail early, with the install hint, if no offscreen OpenGL (EGL) context can be made in this process."""
+    backend = os.environ.get("MUJOCO_GL", "")
+    module = getattr(getattr(mujoco, "GLContext", None), "__module__", "") or "no GL backend"
+    if backend in ("egl", "osmesa") and not module.startswith(f"mujoco.{backend}"):
+        raise RenderingUnavailable(
+            f"mujoco was imported before MUJOCO_GL={backend} took effect and uses {module}; import rover_sim "
+            "before mujoco, or export MUJOCO_GL=egl"
+        )
+    try:
+        ctx = mujoco.GLContext(16, 16)
+        try:
+            ctx.make_current()
+            con = mujoco.MjrContext(mujoco.MjModel.from_xml_string("<mujoco/>"), mujoco.mjtFontScale.mjFONTSCALE_100)
+            con.free()
+        finally:
+            ctx.free()
+    except Exception as exc:  # noqa: BLE001 - any backend failure means "no GL here"; re-raised with the fix
+        raise RenderingUnavailable(f"{type(exc).__name__}: {exc}") from exc
+
+
+# ----------------------------------------------------------------------------------------------- appearance
+
+
+def terrain_texture(
+    terrain: Terrain, px_per_m: float = 100.0, seed: int = 0, *, fine_soil: bool = False, contrast: float = 1.0
+) -> np.ndarray:
+    """RGB uint8 ground texture for ``RoverSim(terrain, texture_rgb=...)``: terrains' albedo times the Mars tint.
+
+    Row 0 is the south edge, column 0 the west edge (``terrains.appearance`` layout), ``px_per_m`` texels per
+    metre. 100 px/m (1 cm texels) matches a 256x256 navcam pixel at about 3 m and a hazcam pixel at about 1 m;
+    the texture must stay below 16384 px a side.
+    """
+    from terrains import albedo_texture, texture_rgb_u8
+
+    side_px = 2.0 * max(terrain.half_x_m, terrain.half_y_m) * px_per_m
+    if side_px > MAX_TEXTURE_PX:
+        raise ValueError(
+            f"a {side_px:.0f} px texture exceeds the {MAX_TEXTURE_PX} px GL limit; lower px_per_m to "
+            f"{MAX_TEXTURE_PX / (2.0 * max(terrain.half_x_m, terrain.half_y_m)):.0f} or less"
+        )
+    return texture_rgb_u8(albedo_texture(terrain, px_per_m, seed, fine_soil=fine_soil, contrast=contrast))
+
+
+def luminance_u8(rgb: np.ndarray) -> np.ndarray:
+    """Rec. 601 luminance of an (H, W, 3) uint8 image, rounded to uint8."""
+    return np.rint(rgb.astype(np.float32) @ LUMA_WEIGHTS).astype(np.uint8)
+
+
+def bin_average(image: np.ndarray, factor: int) -> np.ndarray:
+    """Average ``factor`` x ``factor`` blocks (MER 1024 -> 256 binning), float32."""
+    if factor == 1:
+        return image.astype(np.float32)
+    h, w = image.shape[:2]
+    blocks = image.reshape(h // factor, factor, w // factor, factor, *image.shape[2:])
+    return blocks.mean(axis=(1, 3), dtype=np.float32)
+
+
+def quantise(luma_0_255: np.ndarray, noise: ImageNoise | None, rng: np.random.Generator | None) -> np.ndarray:
+    """Float luminance (0-255 scale) to uint8, through 12-bit read noise and quantisation if ``noise`` is set."""
+    if noise is None:
+        return np.clip(np.rint(luma_0_255), 0, 255).astype(np.uint8)
+    assert rng is not None
+    dn12 = luma_0_255 * (DN12_MAX / 255.0) + rng.normal(0.0, noise.read_noise_dn12, luma_0_255.shape)
+    dn12 = np.clip(np.rint(dn12), 0, DN12_MAX)
+    return np.rint(dn12 * (255.0 / DN12_MAX)).astype(np.uint8)
+
+
+# ---------------------------------------------------------------------------------------------- render model
+
+
+@dataclass(frozen=True)
+class TerrainTiles:
+    """Render-only terrain: square tiles of the heightfield, each as a chain of level-of-detail meshes.
+
+    Level ``L`` keeps every ``2**L``-th grid row and column of its tile (the tile's last row/column always), so
+    it draws the exact hfield surface at ``L = 0`` and a coarser triangulation above; ``error_m[t, L]`` is the
+    largest vertical distance between the hfield and level ``L`` over tile ``t`` (``inf`` where the level does
+    not exist). A skirt, hanging ``skirt_m`` below each tile edge, hides the hairline cracks between
+    neighbouring tiles drawn at different levels.
+    """
+
+    geom_names: np.ndarray  # (N, levels) object array of geom names, "" where the level does not exist
+    boxes: np.ndarray  # (N, 2, 3) world AABB (min, max) of each tile, skirt included
+    error_m: np.ndarray  # (N, levels) non-decreasing in L
+
+    def geom_ids(self, model: mujoco.MjModel) -> np.ndarray:
+        """(N, levels) geom ids in ``model``, -1 where the level does not exist."""
+        return np.vectorize(lambda n: model.geom(n).id if n else -1, otypes=[np.int32])(self.geom_names)
+
+    def choose_levels(self, distance_m: np.ndarray, max_error_rad: float) -> np.ndarray:
+        """Coarsest level per tile whose height error subtends at most ``max_error_rad`` at ``distance_m``."""
+        ok = self.error_m <= (max_error_rad * distance_m)[:, None]
+        return ok.sum(axis=1) - 1  # error is non-decreasing in L and error[:, 0] == 0
+
+
+def _level_indices(lo: int, hi: int, step: int) -> np.ndarray:
+    return np.unique(np.r_[np.arange(lo, hi, step), hi])
+
+
+def _decimation_error(h: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> float:
+    """Max |h - surface through h[rows][:, cols]| over the tile grid ``h``, with MuJoCo's (i,j)-(i+1,j+1) split."""
+    ri = np.clip(np.searchsorted(rows, np.arange(h.shape[0]), side="right") - 1, 0, len(rows) - 2)
+    ci = np.clip(np.searchsorted(cols, np.arange(h.shape[1]), side="right") - 1, 0, len(cols) - 2)
+    fi = ((np.arange(h.shape[0]) - rows[ri]) / (rows[ri + 1] - rows[ri]))[:, None]
+    fj = ((np.arange(h.shape[1]) - cols[ci]) / (cols[ci + 1] - cols[ci]))[None, :]
+    R, C = rows[ri][:, None], cols[ci][None, :]
+    R1, C1 = rows[ri + 1][:, None], cols[ci + 1][None, :]
+    h00, h01, h10, h11 = h[R, C], h[R, C1], h[R1, C], h[R1, C1]
+    upper = h00 + fj * (h01 - h00) + fi * (h11 - h01)  # triangle (i,j), (i,j+1), (i+1,j+1)
+    lower = h00 + fi * (h10 - h00) + fj * (h11 - h10)  # triangle (i,j), (i+1,j+1), (i+1,j)
+    return float(np.abs(h - np.where(fj >= fi, upper, lower)).max())
+
+
+def _tile_mesh(
+    terrain: Terrain, normals: np.ndarray, rows: np.ndarray, cols: np.ndarray, skirt_m: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices, faces, normals and texcoords of one tile level, plus a two-sided skirt along its border."""
+    h = terrain.heights_m
+    ii, jj = np.meshgrid(rows, cols, indexing="ij")
+    verts = np.stack([terrain.xs_m[jj], terrain.ys_m[ii], h[ii, jj]], axis=-1).reshape(-1, 3)
+    norms = normals[ii, jj].reshape(-1, 3)
+    k = np.arange(ii.size).reshape(ii.shape)
+    a, b, c, d = k[:-1, :-1].ravel(), k[:-1, 1:].ravel(), k[1:, 1:].ravel(), k[1:, :-1].ravel()
+    faces = [np.stack([a, b, c], 1), np.stack([a, c, d], 1)]  # counter-clockwise seen from above
+    ring = np.r_[k[0, :-1], k[:-1, -1], k[-1, :0:-1], k[:0:-1, 0], k[0, 0]]  # closed loop along the border
+    low = len(verts) + np.arange(len(ring))
+    verts = np.vstack([verts, verts[ring] - [0.0, 0.0, skirt_m]])
+    norms = np.vstack([norms, norms[ring]])  # skirts shade like the ground they patch
+    top0, top1, low0, low1 = ring[:-1], ring[1:], low[:-1], low[1:]
+    skirt = np.concatenate([np.stack([top0, low0, low1], 1), np.stack([top0, low1, top1], 1)])
+    faces += [skirt, skirt[:, ::-1]]  # both windings: the skirt is seen from either side
+    u = (verts[:, 0] + terrain.half_x_m) / (2.0 * terrain.half_x_m)
+    v = (terrain.half_y_m - verts[:, 1]) / (2.0 * terrain.half_y_m)  # first texture row = north (world.py)
+    return verts, np.concatenate(faces), norms, np.stack([u, v], axis=-1)
+
+
+def add_terrain_tiles(spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_tiles: int) -> TerrainTiles:
+    """Add the render-only terrain tiles (all levels, contact-free, massless) to ``spec``; see :class:`TerrainTiles`.
+
+    Normals come from the whole grid so shading is continuous across tiles and levels; texture coordinates
+    address the one world-fixed terrain texture. The tile side is ``tile_m`` rounded to a power-of-two number
+    of cells, doubled until there are at most ``max_tiles`` tiles (large terrains).
+    """
+    h = terrain.heights_m
+    nrow, ncol = h.shape
+    gy, gx = np.gradient(h, terrain.cell_size_m)
+    normals = np.stack([-gx, -gy, np.ones_like(h)], axis=-1)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True)
+    n = 2 ** max(1, int(round(np.log2(max(tile_m / terrain.cell_size_m, 2.0)))))
+    while ((nrow - 2) // n + 1) * ((ncol - 2) // n + 1) > max_tiles:
+        n *= 2
+    n_levels = int(np.log2(n))  # steps 1, 2, ..., n/2
+    spans = [(i0, min(i0 + n, nrow - 1), j0, min(j0 + n, ncol - 1))
+             for i0 in range(0, nrow - 1, n) for j0 in range(0, ncol - 1, n)]  # fmt: skip
+
+    # per-level rows/cols and errors, then skirts deep enough to cover this tile's and its neighbours' errors
+    levels, errors = [], np.full((len(spans), n_levels), np.inf)
+    for t, (i0, i1, j0, j1) in enumerate(spans):
+        tile_levels = []
+        for L in range(n_levels):
+            rows, cols = _level_indices(i0, i1, 2**L), _level_indices(j0, j1, 2**L)
+            if L > 0 and len(rows) == len(tile_levels[-1][0]) and len(cols) == len(tile_levels[-1][1]):
+                break  # the tile is too small for this level
+            tile_levels.append((rows, cols))
+            errors[t, L] = _decimation_error(h[i0 : i1 + 1, j0 : j1 + 1], rows - i0, cols - j0)
+        levels.append(tile_levels)
+    errors = np.maximum.accumulate(errors, axis=1)
+    grid_shape = ((nrow - 2) // n + 1, (ncol - 2) // n + 1)
+    worst = np.where(np.isfinite(errors), errors, 0.0).max(axis=1).reshape(grid_shape)
+    padded = np.pad(worst, 1)
+    neighbours = np.max([padded[1 + di : 1 + di + grid_shape[0], 1 + dj : 1 + dj + grid_shape[1]]
+                         for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0).ravel()  # fmt: skip
+    skirts = worst.ravel() + neighbours + 1e-3
+
+    mat = spec.add_material()
+    mat.name = TILE_MATERIAL
+    src = spec.material("terrain")
+    mat.textures = list(src.textures)
+    mat.rgba, mat.specular, mat.shininess, mat.reflectance = src.rgba, 0.0, 0.0, 0.0
+    boxes = np.zeros((len(spans), 2, 3))
+    geom_names = np.full((len(spans), n_levels), "", dtype=object)
+    for t, tile_levels in enumerate(levels):
+        for L, (rows, cols) in enumerate(tile_levels):
+            verts, faces, norms, uv = _tile_mesh(terrain, normals, rows, cols, skirts[t])
+            name = f"{TILE_PREFIX}{t:05d}_{L}"
+            mesh = spec.add_mesh()
+            mesh.name = name
+            mesh.uservert = verts.ravel().tolist()
+            mesh.userface = faces.ravel().tolist()
+            mesh.usernormal = norms.ravel().tolist()
+            mesh.usertexcoord = uv.ravel().tolist()
+            mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL  # an open sheet has no volume
+            g = spec.worldbody.add_geom()
+            g.name, g.type, g.meshname, g.material = name, mujoco.mjtGeom.mjGEOM_MESH, name, TILE_MATERIAL
+            g.contype, g.conaffinity, g.group, g.mass = 0, 0, GROUP_HIDDEN, 0.0
+            geom_names[t, L] = name
+            if L == 0:
+                boxes[t] = [verts.min(axis=0), verts.max(axis=0)]
+    return TerrainTiles(geom_names, boxes, errors)
+
+
+def _rock_appearance(spec: mujoco.MjSpec, terrain: Terrain) -> tuple[list[str], np.ndarray]:
+    """Give each rock its own grey level (``terrains.rock_albedo``) and a speckle texture; return AABBs."""
+    from terrains import rock_albedo
+
+    rng = np.random.default_rng(terrain.seed + 7919)
+    noise = np.fft.fft2(rng.normal(0.0, 1.0, (ROCK_TEXTURE_PX, ROCK_TEXTURE_PX)))
+    freq = np.fft.fftfreq(ROCK_TEXTURE_PX)
+    blur = np.exp(-2.0 * np.pi**2 * (freq[:, None] ** 2 + freq[None, :] ** 2))  # Gaussian, sigma 1 px, periodic
+    speckle = np.real(np.fft.ifft2(noise * blur))
+    level = np.clip(0.82 + ROCK_SPECKLE_CONTRAST * speckle / speckle.std(), 0.0, 1.0)
+    tex = spec.add_texture()
+    tex.name, tex.type = ROCK_TEXTURE, mujoco.mjtTexture.mjTEXTURE_2D
+    tex.width, tex.height, tex.nchannel = ROCK_TEXTURE_PX, ROCK_TEXTURE_PX, 3
+    tex.data = np.rint(np.repeat(level[..., None], 3, axis=-1) * 255).astype(np.uint8).tobytes()
+    mat = spec.add_material()
+    mat.name = ROCK_MATERIAL
+    textures = [""] * len(mat.textures)
+    textures[int(mujoco.mjtTextureRole.mjTEXROLE_RGB)] = ROCK_TEXTURE
+    mat.textures = textures
+    mat.specular, mat.shininess = 0.0, 0.0
+
+    names, boxes = [], []
+    for i, rock in enumerate(terrain.rocks):
+        name = f"{ROCK_GEOM_PREFIX}{i:04d}"
+        mesh = spec.mesh(name)
+        verts = np.asarray(mesh.uservert, dtype=float).reshape(-1, 3)
+        s = verts[:, :2] + ROCK_TEXTURE_SLANT * verts[:, 2:3]
+        mesh.usertexcoord = (s / ROCK_TEXTURE_SCALE_M).ravel().tolist()
+        g = spec.geom(name)
+        g.material, g.group = ROCK_MATERIAL, GROUP_SHOWN
+        g.rgba = [*(rock_albedo(rock, terrain.seed) * np.asarray(ROCK_TINT_RGB)), 1.0]
+        names.append(name)
+        boxes.append([verts.min(axis=0), verts.max(axis=0)])
+    return names, np.asarray(boxes).reshape(-1, 2, 3)
+
+
+def _geom_id_map(render_model: mujoco.MjModel, phys_model: mujoco.MjModel) -> np.ndarray:
+    """Render-model geom id -> physics geom id (tiles -> the terrain hfield), by (body, order within body)."""
+
+    def keys(m: mujoco.MjModel) -> list[tuple[int, int]]:
+        count: dict[int, int] = {}
+        out = []
+        for b in m.geom_bodyid:
+            out.append((int(b), count.get(int(b), 0)))
+            count[int(b)] = count.get(int(b), 0) + 1
+        return out
+
+    phys = {k: g for g, k in enumerate(keys(phys_model))}
+    terrain_id = phys_model.geom("terrain").id
+    lut = np.full(render_model.ngeom + 1, -1, dtype=np.int32)  # last entry: background (-1)
+    for g, k in enumerate(keys(render_model)):
+        name = render_model.geom(g).name
+        lut[g] = terrain_id if name.startswith(TILE_PREFIX) else phys[k]
+    return lut
+
+
+class RenderWorld:
+    """The physics model plus render-only geometry, with its own MjData kept in step with the simulation's."""
+
+    def __init__(self, sim: RoverSim, config: RenderConfig) -> None:
+        self.sim, self.config = sim, config
+        spec = sim.spec.copy()
+        self.tiles = add_terrain_tiles(spec, sim.terrain, config.terrain_tile_m, config.max_terrain_tiles)
+        rock_names, self.rock_boxes = _rock_appearance(spec, sim.terrain)
+        spec.geom("terrain").group = GROUP_HIDDEN  # drawn as tiles instead
+        light = spec.light("sun")
+        light.castshadow = True  # shadows are switched per render with the scene flag
+        light.diffuse = [config.sun_intensity] * 3
+        light.ambient, light.specular = [0.0] * 3, [0.0] * 3
+        vis = spec.visual
+        vis.headlight.diffuse, vis.headlight.specular = [0.0] * 3, [0.0] * 3
+        vis.headlight.ambient = [config.sky_ambient] * 3
+        vis.quality.shadowsize = config.shadow_map_px
+        vis.quality.offsamples = config.multisamples
+        vis.quality.numslices, vis.quality.numstacks = config.builtin_slices, config.builtin_stacks
+        vis.map.shadowclip = config.shadow_half_extent_m / spec.stat.extent
+        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, config.resolution_px)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        if self.model.nq != sim.model.nq or self.model.nbody != sim.model.nbody:
+            raise RuntimeError("render model layout differs from the physics model (render-only geoms only!)")
+        m = self.model
+        self.tile_ids = self.tiles.geom_ids(m)
+        self.rock_ids = np.array([m.geom(n).id for n in rock_names], dtype=np.int32)
+        self.geom_to_phys = _geom_id_map(m, sim.model)
+        self.sun_id = m.light("sun").id
+        self.floor_z = float(sim.terrain.heights_m.min())
+        self.option = mujoco.MjvOption()
+        self.option.geomgroup[:] = 0
+        self.option.geomgroup[[GROUP_SHOWN, 2]] = 1  # terrain tiles and rocks, rover visuals
+
+    def sync(self) -> None:
+        """Copy the simulation state and recompute poses (kinematics, cameras, lights)."""
+        self.data.qpos[:] = self.sim.data.qpos
+        self.data.time = self.sim.data.time
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_camlight(self.model, self.data)
+
+    def prepare(self, cams: list[PinholeCamera], T_world_cams: list[np.ndarray], shadows: bool) -> dict:
+        """Pick what to draw for these cameras (culling, tile levels) and aim the shadow box; returns counts."""
+        cfg = self.config
+        light_dir = self.data.light_xdir[self.sun_id].copy()
+        boxes = np.concatenate([self.tiles.boxes, self.rock_boxes])
+        if cfg.cull:
+            view_boxes = boxes
+            if shadows:  # a geom can shade the view from outside it: sweep its box along the sunlight
+                reach = np.clip((boxes[:, 1, 2] - self.floor_z) / max(-light_dir[2], 0.05), 0.0,
+                                4.0 * cfg.shadow_half_extent_m)  # fmt: skip
+                ends = np.stack([np.zeros_like(reach), reach], axis=1)[:, :, None, None] * light_dir
+                swept = boxes[:, None, :, :] + ends  # (N, 2 ends, 2 corners, 3)
+                view_boxes = np.stack([swept.min(axis=(1, 2)), swept.max(axis=(1, 2))], axis=1)
+            shown = np.zeros(len(boxes), dtype=bool)
+            for cam, T in zip(cams, T_world_cams, strict=True):
+                shown |= boxes_in_view(view_boxes, cam, T)
+        else:
+            shown = np.ones(len(boxes), dtype=bool)
+        n_tiles = len(self.tiles.boxes)
+        tiles_shown, rocks_shown = shown[:n_tiles], shown[n_tiles:]
+        if cfg.lod:
+            dist = np.min([box_distance(self.tiles.boxes, T[:3, 3]) for T in T_world_cams], axis=0)
+            level = self.tiles.choose_levels(dist, cfg.lod_tolerance_px / cams[0].fx_px)
+        else:
+            level = np.zeros(n_tiles, dtype=int)
+        groups = self.model.geom_group
+        groups[self.tile_ids[self.tile_ids >= 0]] = GROUP_HIDDEN
+        sel = np.flatnonzero(tiles_shown)
+        groups[self.tile_ids[sel, level[sel]]] = GROUP_SHOWN
+        groups[self.rock_ids] = np.where(rocks_shown, GROUP_SHOWN, GROUP_HIDDEN)
+        self._aim_sun(T_world_cams[0], light_dir)
+        return {"tiles_drawn": int(tiles_shown.sum()), "rocks_drawn": int(rocks_shown.sum()),
+                "tile_levels": np.bincount(level[sel], minlength=self.tiles.error_m.shape[1]).tolist()}  # fmt: skip
+
+    def _aim_sun(self, T_world_cam: np.ndarray, light_dir: np.ndarray) -> None:
+        """Centre the directional light's shadow box on the ground ahead of the camera."""
+        half = self.config.shadow_half_extent_m
+        fwd = T_world_cam[:3, 2].copy()
+        fwd[2] = 0.0
+        norm = np.linalg.norm(fwd)
+        fwd = fwd / norm if norm > 1e-6 else np.zeros(3)
+        centre = T_world_cam[:3, 3] + 0.5 * half * fwd
+        centre[2] = float(self.sim.terrain.height_at(centre[0], centre[1]))
+        self.data.light_xpos[self.sun_id] = centre - light_dir * (2.0 * half + SUN_DISTANCE_MARGIN_M)
+
+
+def box_distance(boxes: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """(N,) distance from ``point`` to each axis-aligned box ``(N, 2, 3)`` (0 inside)."""
+    gap = np.maximum(np.maximum(boxes[:, 0] - point, point - boxes[:, 1]), 0.0)
+    return np.linalg.norm(gap, axis=1)
+
+
+def boxes_in_view(boxes: np.ndarray, cam: PinholeCamera, T_world_cam: np.ndarray, near_m: float = 0.0) -> np.ndarray:
+    """(N,) bool: axis-aligned boxes ``(N, 2, 3)`` (min, max corners, world) that may intersect the view frustum.
+
+    Conservative: a box is rejected only when all 8 corners lie outside one frustum side plane.
+    """
+    corners = np.stack(
+        [np.stack([boxes[:, i, 0], boxes[:, j, 1], boxes[:, k, 2]], axis=-1)
+         for i in (0, 1) for j in (0, 1) for k in (0, 1)], axis=1)  # fmt: skip
+    R, c = T_world_cam[:3, :3], T_world_cam[:3, 3]
+    p = (corners - c) @ R  # camera frame
+    # inward normals of the side planes (through the optical centre) and the near plane
+    hw, hh = 0.5 * cam.width_px + 1.0, 0.5 * cam.height_px + 1.0
+    planes = np.array([[cam.fx_px, 0, hw], [-cam.fx_px, 0, hw], [0, cam.fy_px, hh], [0, -cam.fy_px, hh], [0, 0, 1]])
+    offsets = np.array([0, 0, 0, 0, near_m])
+    inside = p @ planes.T - offsets >= 0.0  # (N, 8, 5)
+    return inside.any(axis=1).all(axis=1)
+
+
+# ------------------------------------------------------------------------------------------------- renderer
+
+
+class StereoRenderer:
+    """Renders the rover's stereo pairs, depth and segmentation from a :class:`RoverSim`'s current state.
+
+    Owns one :class:`mujoco.Renderer` (one EGL context) per rasterised resolution, created on first use and
+    reused; close it (or use it as a context manager) to free them. Camera geometry is taken from the physics
+    model, so :meth:`rig` equals :func:`rover_sim.cameras.stereo_rig` at the output resolution.
+    """
+
+    def __init__(self, sim: RoverSim, config: RenderConfig | None = None) -> None:
+        check_gl()
+        self.config = config or RenderConfig()
+        self.sim = sim
+        self.world = RenderWorld(sim, self.config)
+        self.shadows = self.config.shadows
+        self._renderers: dict[int, mujoco.Renderer] = {}
+        self._rng = np.random.default_rng(self.config.noise.seed) if self.config.noise else None
+        self._right_cam = mujoco.MjvCamera()
+        self._right_cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self.last_drawn: dict = {}  # what the last render drew (tiles, rocks, tile levels): diagnostics
+
+    # -- lifecycle
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()
+
+    def __enter__(self) -> StereoRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _renderer(self, px: int) -> mujoco.Renderer:
+        r = self._renderers.get(px)
+        if r is None:
+            r = mujoco.Renderer(self.world.model, px, px)
+            self._renderers[px] = r
+        sc = r.scene
+        sc.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.shadows
+        sc.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = self.config.skybox
+        sc.flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = False
+        sc.flags[mujoco.mjtRndFlag.mjRND_FOG] = False
+        sc.flags[mujoco.mjtRndFlag.mjRND_HAZE] = False
+        return r
+
+    # -- cameras
+    def rig(self, pair: str) -> StereoRig:
+        """Stereo rig of ``pair`` at the output resolution, from the simulation's current state."""
+        return stereo_rig(self.sim.model, self.sim.data, pair, self.config.resolution_px)
+
+    def camera(self, cam_name: str, resolution_px: int | None = None) -> PinholeCamera:
+        px = resolution_px or self.config.resolution_px
+        return camera_model(self.sim.model, self.sim.data, cam_name, px, px)
+
+    # -- rendering core
+    def _scene_for(self, cam_names: list[str], px: int) -> mujoco.Renderer:
+        """Sync state, cull for all ``cam_names``, build the scene for the first camera; returns the renderer."""
+        w = self.world
+        w.sync()
+        cams = [camera_model(w.model, w.data, n, px, px) for n in cam_names]
+        poses = [camera_world_pose(w.model, w.data, n) for n in cam_names]
+        self.last_drawn = w.prepare(cams, poses, self.shadows)
+        r = self._renderer(px)
+        r.update_scene(w.data, camera=cam_names[0], scene_option=w.option)
+        return r
+
+    def _switch_camera(self, r: mujoco.Renderer, cam_name: str) -> None:
+        """Point the already-built scene at another camera (geometry, culling and lights unchanged)."""
+        self._right_cam.fixedcamid = self.world.model.camera(cam_name).id
+        mujoco.mjv_updateCamera(self.world.model, self.world.data, self._right_cam, r.scene)
+
+    def _grey(self, rgb: np.ndarray) -> np.ndarray:
+        luma = bin_average(rgb.astype(np.float32) @ LUMA_WEIGHTS, self.config.binning)
+        return quantise(luma, self.config.noise, self._rng)
+
+    # -- public renders
+    def render_pair(self, pair: str = "navcam") -> StereoFrame:
+        """Greyscale stereo pair (uint8, ``resolution_px`` square) of ``pair`` at the simulation's current state."""
+        if pair not in STEREO_PAIRS:
+            raise ValueError(f"unknown stereo pair {pair!r}; choose one of {STEREO_PAIRS}")
+        names = [f"{pair}_left", f"{pair}_right"]
+        r = self._scene_for(names, self.config.native_px)
+        left = self._grey(r.render())
+        self._switch_camera(r, names[1])
+        right = self._grey(r.render())
+        return StereoFrame(self.sim.time_s, self.rig(pair), left, right, dict(self.last_drawn))
+
+    def render_rgb(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
+        """(H, W, 3) uint8 colour image of one camera (no binning, no noise): for logging and debugging."""
+        px = resolution_px or self.config.resolution_px
+        return self._scene_for([cam_name], px).render()
+
+    def render_grey(self, cam_name: str) -> np.ndarray:
+        """Greyscale image of one camera, processed like :meth:`render_pair` (binning, noise)."""
+        return self._grey(self._scene_for([cam_name], self.config.native_px).render())
+
+    def render_depth(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
+        """(H, W) float32 z-depth in metres along the optical axis (OpenCV z) at pixel centres; inf = sky.
+
+        Rendered directly at the output resolution (never binned: averaging depth across edges is meaningless).
+        MuJoCo's depth buffer holds the distance along the camera's -z axis, which is the OpenCV +z depth.
+        """
+        px = resolution_px or self.config.resolution_px
+        r = self._scene_for([cam_name], px)
+        r.enable_depth_rendering()
+        try:
+            depth = r.render()
+        finally:
+            r.disable_depth_rendering()
+        far = self.world.model.vis.map.zfar * self.world.model.stat.extent
+        depth[depth >= NO_HIT_DEPTH_FRACTION * far] = np.inf
+        return depth
+
+    def render_segmentation(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
+        """(H, W) int32 geom id **of the physics model** seen at each pixel (terrain tiles -> ``terrain``); -1 sky."""
+        px = resolution_px or self.config.resolution_px
+        r = self._scene_for([cam_name], px)
+        r.enable_segmentation_rendering()
+        try:
+            seg = r.render()
+        finally:
+            r.disable_segmentation_rendering()
+        ids = np.where(seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM), seg[..., 0], -1)
+        return self.world.geom_to_phys[ids]  # -1 indexes the LUT's last entry, which is -1
