@@ -127,8 +127,13 @@ def render_to_dir(
     cfg = config or RenderConfig()
     if cfg.resolution_px != resolution:
         cfg = RenderConfig(**{**cfg.__dict__, "resolution_px": resolution})
-    paths = {k: out / f for k, f in (("left", "left.png"), ("right", "right.png"),
-                                      ("depth_left", "depth_left.npy"), ("camera_model", "camera_model.json"))}  # fmt: skip
+    names = {
+        "left": "left.png",
+        "right": "right.png",
+        "depth_left": "depth_left.npy",
+        "camera_model": "camera_model.json",
+    }
+    paths = {k: out / f for k, f in names.items()}
     with StereoRenderer(sim, cfg) as renderer:
         frame = renderer.render_pair(which)
         depth = renderer.render_depth(f"{which}_left")

@@ -44,6 +44,30 @@ def bench_slip(json: JsonOpt = None, seed: int = 0) -> None:
         raise typer.Exit(code=1)
 
 
+@bench_app.command("vo")
+def bench_vo_cmd(json: JsonOpt = None) -> None:
+    """VO cases of the issue: MSSTB rock course, 30 m slope, featureless soil, rover shadow."""
+    from rover_sim.bench.missions import bench_vo
+
+    results = bench_vo(str(json) if json else None)
+    if not all(r["passed"] for r in results.values()):
+        raise typer.Exit(code=1)
+
+
+@bench_app.command("suite")
+def bench_suite_cmd(
+    json: JsonOpt = None,
+    fast: Annotated[bool, typer.Option("--fast", help="Only the CI subset (scenarios with fast = true).")] = False,
+    update_baseline: Annotated[bool, typer.Option("--update-baseline", help="Store these results as baseline.")] = False,
+) -> None:
+    """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline."""
+    from rover_sim.bench.missions import bench_suite
+
+    _, ok = bench_suite(str(json) if json else None, fast=fast, update_baseline=update_baseline)
+    if not ok:
+        raise typer.Exit(code=1)
+
+
 SetOpt = Annotated[list[str] | None, typer.Option("--set", help="Override a scenario field: dotted.key=value.")]
 
 

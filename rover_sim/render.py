@@ -10,14 +10,17 @@ MER cameras were 1024x1024 12-bit greyscale; navigation used 256x256 images binn
 * ``binning=4``: render 1024x1024 and average 4x4 blocks, as the MER flight cameras did: correct pixel-area
   integration of texture and edges, but 4-5x slower on a software rasteriser.
 
-Speed (llvmpipe: Mesa's CPU rasteriser, vertex processing single-threaded): cost is dominated by the terrain's
-triangle count times the number of passes (one ambient pass, one shadow-map pass and one sunlit pass when shadows
-are on). So the renderer draws the terrain from a *render model* (the physics model plus render-only terrain tiles,
-``terrain_tile_*`` meshes of about 1.6 m square, with world-fixed texture coordinates) and, for every pair, hides
-the tiles and rocks that cannot appear in either camera or cast a shadow into it. The physics model is never
-modified: the render model's state is copied from ``sim.data`` before each render. The shadow map covers a square
-``2 * shadow_half_extent_m`` wide (perpendicular to the sunlight) in front of the cameras, and the sun light is
-moved with the cameras so it always covers the view.
+Speed (llvmpipe: Mesa's CPU rasteriser; its vertex stage is single-threaded): the cost is the triangle count times
+the number of passes (ambient, shadow map and sunlit passes with shadows on, one pass without), and a 20 m x 20 m
+terrain at 5 cm is 320k triangles. So the renderer draws from a *render model*: the physics model plus render-only
+terrain tiles (``terrain_tile_*`` meshes about 1.6 m square, each at several levels of detail, with world-fixed
+texture coordinates, drawn in place of the physics hfield, which they reproduce exactly at level 0). Before each
+render it hides the tiles and rocks that can neither appear in a camera nor cast a shadow into it, and draws each
+remaining tile at the coarsest level whose height error stays below ``lod_tolerance_px`` pixels and
+``lod_max_depth_error`` of the range (:class:`TerrainTiles`). The physics model is never modified; the render
+model's state is copied from ``sim.data`` before each render. The directional sun's shadow map covers a square
+``2 * shadow_half_extent_m`` wide (perpendicular to the sunlight; ``hazcam_shadow_half_extent_m`` for the hazcams)
+centred ahead of the cameras: the light is re-aimed for every render.
 
 Lighting: the sun (directional, diffuse ``sun_intensity``, casts shadows) plus a uniform sky term
 (``sky_ambient``, the MuJoCo headlight's ambient part; its diffuse part is off so nothing is lit from the camera).
@@ -84,9 +87,12 @@ class RenderConfig:
     binning: int = 1  # 1: render at resolution_px; 4: render 4x larger and average 4x4 blocks (MER style)
     shadows: bool = True
     shadow_map_px: int = 2048  # shadow-map side; with the 16 m wide shadow box: 8 mm per texel (1024: 20 % faster)
-    shadow_half_extent_m: float = 8.0  # half width of the shadowed square (perpendicular to the sunlight)
-    builtin_slices: int = 12  # tessellation of the rover's cylinders/capsules (MuJoCo default 28: 4x the triangles)
-    builtin_stacks: int = 4  # (MuJoCo default 16)
+    shadow_half_extent_m: float = 8.0  # half width of the shadowed square (perpendicular to the sunlight), navcams
+    hazcam_shadow_half_extent_m: float = 4.0  # the same for the hazcams, which look near: 4 mm texels at 2048
+    # tessellation of the rover's cylinders/capsules (MuJoCo defaults 28, 16): 24 slices keep a wheel's facets
+    # within 1.1 mm of the true cylinder (0.4 % of the depth at the hazcams' 0.26 m)
+    builtin_slices: int = 24
+    builtin_stacks: int = 8
     multisamples: int = 0  # MSAA samples per pixel (0 = off; 4 costs about 25 % more at 256x256)
     skybox: bool = True  # draw the sky gradient where no terrain is seen (cheap)
     terrain_tile_m: float = 1.6  # side of the render-only terrain tiles (culling and level-of-detail unit)
@@ -94,6 +100,7 @@ class RenderConfig:
     cull: bool = True  # hide terrain tiles and rocks outside both cameras' view (and their shadow volume)
     lod: bool = True  # draw distant tiles coarser while their height error stays under lod_tolerance_px
     lod_tolerance_px: float = 0.25  # largest height error of a tile level, in pixels at the tile's distance
+    lod_max_depth_error: float = 0.005  # ... and at most this fraction of the range along grazing rays
     sun_intensity: float = 1.3  # diffuse strength of the sun (above 1: exposure gain; GL clamps per channel)
     sky_ambient: float = 0.5  # uniform ambient light standing in for the dusty sky
     noise: ImageNoise | None = None
@@ -101,8 +108,11 @@ class RenderConfig:
     def __post_init__(self) -> None:
         if self.resolution_px < 8 or self.binning < 1:
             raise ValueError(f"resolution_px must be >= 8 and binning >= 1, got {self.resolution_px}, {self.binning}")
-        if self.shadow_half_extent_m <= 0 or self.terrain_tile_m <= 0:
-            raise ValueError("shadow_half_extent_m and terrain_tile_m must be positive")
+        if min(self.shadow_half_extent_m, self.hazcam_shadow_half_extent_m, self.terrain_tile_m) <= 0:
+            raise ValueError("shadow extents and terrain_tile_m must be positive")
+
+    def shadow_half_extent_for(self, cam_name: str) -> float:
+        return self.hazcam_shadow_half_extent_m if cam_name.startswith("hazcam") else self.shadow_half_extent_m
 
     @property
     def native_px(self) -> int:
@@ -215,9 +225,9 @@ class TerrainTiles:
         """(N, levels) geom ids in ``model``, -1 where the level does not exist."""
         return np.vectorize(lambda n: model.geom(n).id if n else -1, otypes=[np.int32])(self.geom_names)
 
-    def choose_levels(self, distance_m: np.ndarray, max_error_rad: float) -> np.ndarray:
-        """Coarsest level per tile whose height error subtends at most ``max_error_rad`` at ``distance_m``."""
-        ok = self.error_m <= (max_error_rad * distance_m)[:, None]
+    def choose_levels(self, allowed_error_m: np.ndarray) -> np.ndarray:
+        """Coarsest level per tile whose height error is at most ``allowed_error_m`` (per tile)."""
+        ok = self.error_m <= allowed_error_m[:, None]
         return ok.sum(axis=1) - 1  # error is non-decreasing in L and error[:, 0] == 0
 
 
@@ -403,7 +413,7 @@ class RenderWorld:
         vis.quality.offsamples = config.multisamples
         vis.quality.numslices, vis.quality.numstacks = config.builtin_slices, config.builtin_stacks
         vis.map.shadowclip = config.shadow_half_extent_m / spec.stat.extent
-        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, config.resolution_px)
+        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024)  # render_rgb up to 1024
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         if self.model.nq != sim.model.nq or self.model.nbody != sim.model.nbody:
@@ -425,7 +435,9 @@ class RenderWorld:
         mujoco.mj_kinematics(self.model, self.data)
         mujoco.mj_camlight(self.model, self.data)
 
-    def prepare(self, cams: list[PinholeCamera], T_world_cams: list[np.ndarray], shadows: bool) -> dict:
+    def prepare(
+        self, cams: list[PinholeCamera], T_world_cams: list[np.ndarray], shadows: bool, shadow_half_m: float
+    ) -> dict:
         """Pick what to draw for these cameras (culling, tile levels) and aim the shadow box; returns counts."""
         cfg = self.config
         light_dir = self.data.light_xdir[self.sun_id].copy()
@@ -434,7 +446,7 @@ class RenderWorld:
             view_boxes = boxes
             if shadows:  # a geom can shade the view from outside it: sweep its box along the sunlight
                 reach = np.clip((boxes[:, 1, 2] - self.floor_z) / max(-light_dir[2], 0.05), 0.0,
-                                4.0 * cfg.shadow_half_extent_m)  # fmt: skip
+                                4.0 * shadow_half_m)  # fmt: skip
                 ends = np.stack([np.zeros_like(reach), reach], axis=1)[:, :, None, None] * light_dir
                 swept = boxes[:, None, :, :] + ends  # (N, 2 ends, 2 corners, 3)
                 view_boxes = np.stack([swept.min(axis=(1, 2)), swept.max(axis=(1, 2))], axis=1)
@@ -446,8 +458,7 @@ class RenderWorld:
         n_tiles = len(self.tiles.boxes)
         tiles_shown, rocks_shown = shown[:n_tiles], shown[n_tiles:]
         if cfg.lod:
-            dist = np.min([box_distance(self.tiles.boxes, T[:3, 3]) for T in T_world_cams], axis=0)
-            level = self.tiles.choose_levels(dist, cfg.lod_tolerance_px / cams[0].fx_px)
+            level = self.tiles.choose_levels(self._lod_allowance_m(cams[0], T_world_cams))
         else:
             level = np.zeros(n_tiles, dtype=int)
         groups = self.model.geom_group
@@ -455,13 +466,25 @@ class RenderWorld:
         sel = np.flatnonzero(tiles_shown)
         groups[self.tile_ids[sel, level[sel]]] = GROUP_SHOWN
         groups[self.rock_ids] = np.where(rocks_shown, GROUP_SHOWN, GROUP_HIDDEN)
-        self._aim_sun(T_world_cams[0], light_dir)
+        self._aim_sun(T_world_cams[0], light_dir, shadow_half_m)
         return {"tiles_drawn": int(tiles_shown.sum()), "rocks_drawn": int(rocks_shown.sum()),
                 "tile_levels": np.bincount(level[sel], minlength=self.tiles.error_m.shape[1]).tolist()}  # fmt: skip
 
-    def _aim_sun(self, T_world_cam: np.ndarray, light_dir: np.ndarray) -> None:
+    def _lod_allowance_m(self, cam: PinholeCamera, T_world_cams: list[np.ndarray]) -> np.ndarray:
+        """Largest tolerable height error per tile: the smaller of an image-space bound (``lod_tolerance_px`` at
+        the tile's distance) and a range bound (``lod_max_depth_error`` of the range, for rays grazing flat ground
+        from the camera's height above the tile, where a height error ``e`` moves the range by ``e / sin(angle)``).
+        """
+        cfg, boxes = self.config, self.tiles.boxes
+        allowed = np.full(len(boxes), np.inf)
+        for T in T_world_cams:
+            image = cfg.lod_tolerance_px / cam.fx_px * box_distance(boxes, T[:3, 3])
+            depth = cfg.lod_max_depth_error * np.maximum(T[2, 3] - boxes[:, 1, 2], 0.0)
+            allowed = np.minimum(allowed, np.minimum(image, depth))
+        return allowed
+
+    def _aim_sun(self, T_world_cam: np.ndarray, light_dir: np.ndarray, half: float) -> None:
         """Centre the directional light's shadow box on the ground ahead of the camera."""
-        half = self.config.shadow_half_extent_m
         fwd = T_world_cam[:3, 2].copy()
         fwd[2] = 0.0
         norm = np.linalg.norm(fwd)
@@ -559,8 +582,10 @@ class StereoRenderer:
         w.sync()
         cams = [camera_model(w.model, w.data, n, px, px) for n in cam_names]
         poses = [camera_world_pose(w.model, w.data, n) for n in cam_names]
-        self.last_drawn = w.prepare(cams, poses, self.shadows)
+        half = self.config.shadow_half_extent_for(cam_names[0])
+        self.last_drawn = w.prepare(cams, poses, self.shadows, half)
         r = self._renderer(px)
+        r._mjr_context.shadowClip = half  # the directional light's shadow box (read at every mjr_render)
         r.update_scene(w.data, camera=cam_names[0], scene_option=w.option)
         return r
 

@@ -156,6 +156,8 @@ class Mission:
         self.halted: Halt | None = None
         self.error: str | None = None
         self.step = 0
+        self.keep_out_info: dict | None = None
+        self.autonav_stats = None  # set by rover_sim.autonav when the scenario uses autonav
         self.body_collision_ticks = 0
         self._last_frame_truth: np.ndarray | None = None
         self._last_frame_dr_distance = 0.0
@@ -294,7 +296,16 @@ class Mission:
         for z in self.sc.keep_out:
             d = math.hypot(p[0] - z.x_m, p[1] - z.y_m)
             if d < z.radius_m:
-                raise Halt("keep_out", f"onboard pose {d:.2f} m from {z.name} (limit {z.radius_m} m)")
+                q = self.dr.pose.position_xyz_m
+                t = self.sim.position_m()
+                self.keep_out_info = {
+                    "zone": z.name,
+                    "onboard_distance_m": round(d, 3),
+                    "dead_reckoning_distance_m": round(math.hypot(q[0] - z.x_m, q[1] - z.y_m), 3),
+                    "true_distance_m": round(math.hypot(t[0] - z.x_m, t[1] - z.y_m), 3),
+                }
+                raise Halt("keep_out", f"onboard pose {d:.2f} m from {z.name} (limit {z.radius_m} m); dead "
+                           f"reckoning thinks {self.keep_out_info['dead_reckoning_distance_m']:.2f} m")
         return None
 
     # ------------------------------------------------------------------ VO
@@ -451,9 +462,23 @@ class Mission:
             body_collisions=self.body_collision_ticks,
             goal_distance_m=round(float(np.linalg.norm(end[:2] - goal)), 3) if goal is not None else None,
             sim_s=round(self.sim.time_s, 2),
+            extra=self._extra(),
         )
         m.passed, m.reason = self._judge(m)
         return m
+
+    def _extra(self) -> dict:
+        out: dict = {}
+        if self.keep_out_info:
+            out["keep_out"] = self.keep_out_info
+        if self.autonav_stats is not None:
+            ms = self.autonav_stats.cycle_ms
+            out["autonav"] = {
+                "cycles": self.autonav_stats.cycles,
+                "outcome": self.autonav_stats.outcome,
+                "cycle_ms_median": round(float(np.median(ms)), 1) if ms else None,
+            }
+        return out
 
     def _last_goal(self) -> np.ndarray | None:
         for c in reversed(self.sc.commands):
@@ -492,6 +517,11 @@ class Mission:
             need(m.halted == p.expect_halt, f"expected a {p.expect_halt} halt, got {m.halted}")
         elif m.halted is not None:
             fails.append(f"unexpected {m.halted} halt")
+        if p.expect_dead_reckoning_clear:
+            info = self.keep_out_info
+            need(info is not None and info["dead_reckoning_distance_m"] > info["onboard_distance_m"] + 0.1
+                 and any(info["dead_reckoning_distance_m"] >= z.radius_m for z in self.sc.keep_out),
+                 "dead reckoning did not believe the rover clear at the keep-out halt")
         if p.goal_within_m is not None:
             need(m.goal_distance_m is not None and m.goal_distance_m <= p.goal_within_m,
                  f"ended {m.goal_distance_m} m from the goal (> {p.goal_within_m} m)")

@@ -138,6 +138,9 @@ class PassSpec(_Spec):
     max_max_slip_pct: float | None = Field(None, ge=0.0, le=500.0)
     max_false_positives: int | None = Field(None, ge=0, le=1000)
     expect_halt: Literal["keep_out", "slip_limit"] | None = None
+    expect_dead_reckoning_clear: bool = Field(
+        False, description="At a keep-out halt, dead reckoning alone still believes the rover outside the zone."
+    )
     goal_within_m: float | None = Field(None, gt=0.0, le=100.0, description="Truth within this of the last goal.")
     max_body_collisions: int | None = Field(None, ge=0, le=1000)
 

@@ -1,0 +1,635 @@
+"""GESTALT obstacle avoidance: goodness map, steering-arc votes, arbiter (Maimone et al. 2005, section 4.2).
+
+"Range images from stereo are converted to goodness or traversability maps with 20 cm cells in a 10x10 m grid
+centered on the rover. [...] planar patches centered on each map cell [...] each patch is a circle with the diameter
+of the rover. The surface normal, RMS residual, and minimum and maximum elevation difference from the best fit plane
+determine a goodness factor [...] Goodness maps [...] are registered and accumulated over time with the usual modulo
+map indexing [...] new data overwrites the old [...] 23 forward arcs, 23 backward arcs, and two point turns [...]
+adding up the goodness scores along each arc, with nearby cells given higher weight. [...] an arbiter, which also
+takes input from waypoints."
+
+One cycle, :meth:`GestaltPlanner.step`, reads as the paper's steps:
+
+1. :meth:`GoodnessMap.update` - bin the world-frame range points into a world-fixed toroidal grid of per-cell point
+   statistics (count, first and second moments, min/max elevation); cells seen in this image replace what was there.
+2. :meth:`GoodnessMap.evaluate` - per cell of the 10 m window around the rover: least-squares plane through the
+   points within ``patch_radius_m`` (summed moments of the neighbouring cells, one convolution per moment), giving
+   tilt, RMS roughness and the step (spread of the min/max elevations about the plane); goodness 1 on benign ground
+   falling linearly to 0 at any limit.
+3. :func:`vote_arcs` - traversability vote per arc: weighted mean goodness over the swept rover footprint, nearer
+   cells weighted more; an unknown or impassable cell on the near part of the footprint's core (the footprint less
+   the patch radius, which goodness has already added around every obstacle) vetoes the arc.
+4. :func:`waypoint_votes` and :func:`arbitrate` - the goal's vote, then the best weighted sum of safe arcs, or none.
+
+Frames: world x east, y north, z up; poses are ``(x_m, y_m, yaw_rad)`` in the world, yaw about +z from +x. Arcs are
+defined in the rover frame (x forward, y left). Pure: no drawing or logging; every result is returned as data.
+
+Footprint sizes (see :class:`GestaltParams`): the paper's plane-fit patch is the whole rover (2.6 m diameter), which
+grows every obstacle by the rover's radius, so arcs can be judged along their centre line. Here the patch is smaller
+(0.6 m radius: about the wheel track's half-width, the wheels of a rover centred on the cell) so tilt and roughness
+describe the ground under the wheels rather than a 5 m^2 average. Vetoes look at the footprint's core: 0.1 m either
+side of the path (0.7 m half-width less the 0.6 m the patch already added), 0.4 m around a point turn. Votes average
+over the full swept footprint, so arcs passing obstacles with a margin score better.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+# moments binned per cell, offsets (dx, dy) from the cell centre, z world elevation
+_MOMENTS = ("n", "dx", "dy", "z", "dxdx", "dxdy", "dydy", "dxz", "dyz", "zz")
+_NO_CELL = np.iinfo(np.int64).min
+
+
+@dataclass(frozen=True)
+class GestaltParams:
+    """Every GESTALT threshold, with units. Paper values are marked "paper"; the rest say why."""
+
+    # --- goodness map ---
+    cell_size_m: float = 0.20  # paper
+    map_size_m: float = 10.0  # paper: 10 x 10 m window centred on the rover
+    # Radius of the plane-fit patch around each cell. Paper: the rover's diameter (2.6 m), i.e. 1.3 m; here 0.6 m
+    # because arcs are scored over the swept footprint as well (module docstring).
+    patch_radius_m: float = 0.6
+    min_points_per_cell: int = 3  # a cell with fewer own points is unknown
+    min_points_patch: int = 20  # ... as is one whose patch holds fewer points
+    # Goodness falls linearly from 1 at the benign value to 0 at the limit, per factor; the cell takes the worst.
+    benign_tilt_deg: float = 10.0  # slip grows with slope beyond ~10-15 deg on sand (REFERENCE 2)
+    max_tilt_deg: float = 30.0  # MER's rated static stability (about 30 deg; 31 deg seen on Mars)
+    benign_roughness_m: float = 0.02  # RMS residual about the patch plane: sensor noise and gravel
+    max_roughness_m: float = 0.10
+    # Spread of elevations about the plane (rocks, ledges, holes). Stereo noise alone gives ~5 sigma: ~7 cm for the
+    # ~1.5 cm elevation noise of 256^2 navcam stereo at 4-5 m.
+    benign_step_m: float = 0.10
+    max_step_m: float = 0.25  # about one wheel diameter: MER could climb that, GESTALT stayed conservative
+
+    # --- arcs ---
+    n_forward_arcs: int = 23  # paper
+    n_backward_arcs: int = 23  # paper
+    max_curvature_per_m: float = 1.0  # tightest arc: 1 m radius (sharper turns are point turns)
+    point_turn_deg: float = 45.0  # heading change of each of the two point turns (left, right)
+    look_ahead_m: float = 3.0  # arc length scored; the rover re-plans after step_distance_m anyway
+    step_distance_m: float = 0.5  # distance driven along the winning arc per cycle (paper: 35 cm to 1 m)
+    rover_half_width_m: float = 0.7  # swept footprint half-width: track 1.1-1.2 m plus the wheels, plus margin
+    turn_radius_m: float = 1.0  # footprint swept by a point turn: half the rover's diagonal
+
+    # --- votes ---
+    near_distance_m: float = 1.5  # unknown or impassable cells this close along an arc veto it (3 cycles' drive)
+    # The ground under the rover is not in its cameras' view but it is standing on it: unknown cells this close to
+    # the rover's centre count as benign.
+    assume_safe_radius_m: float = 1.0
+    impassable_goodness: float = 0.0  # cells at or below this goodness are impassable
+    unknown_goodness: float = 0.5  # goodness of an unknown cell beyond the near part
+    weight_decay_m: float = 1.5  # cell weight exp(-s / decay), s the arc length at which the footprint reaches it
+    # --- waypoint vote and arbiter ---
+    progress_weight: float = 1.0  # waypoint vote: distance gained towards the goal over this cycle's drive ...
+    heading_weight: float = 1.0  # ... and how well the rover then faces the goal
+    traversability_weight: float = 1.0  # arbiter: score = traversability_weight * trav + waypoint_weight * wp
+    waypoint_weight: float = 1.0
+    # ... minus a preference for driving forward: a point turn makes no progress and its footprint (the ground the
+    # rover stands on) always votes well; driving backward the rover does not look where it goes.
+    backward_penalty: float = 0.1
+    point_turn_penalty: float = 0.25
+    min_traversability_vote: float = 0.2  # arcs voted below this are never chosen
+
+    def __post_init__(self) -> None:
+        if self.cell_size_m <= 0 or self.map_size_m < 4 * self.cell_size_m:
+            raise ValueError("cell_size_m must be > 0 and map_size_m at least 4 cells")
+        if self.patch_radius_m < self.cell_size_m:
+            raise ValueError(f"patch_radius_m={self.patch_radius_m}: use at least one cell ({self.cell_size_m} m)")
+        for name in ("tilt_deg", "roughness_m", "step_m"):
+            if not getattr(self, f"benign_{name}") < getattr(self, f"max_{name}"):
+                raise ValueError(f"need benign_{name} < max_{name}")
+        if self.n_forward_arcs < 1 or self.n_backward_arcs < 0:
+            raise ValueError("need at least one forward arc and a non-negative number of backward arcs")
+        if self.look_ahead_m + self.rover_half_width_m >= self.map_size_m / 2:
+            raise ValueError("look_ahead_m + rover_half_width_m must stay inside the map window (map_size_m / 2)")
+
+    @property
+    def window_cells(self) -> int:
+        """Cells per side of the evaluated window (50 for 10 m at 20 cm)."""
+        return int(round(self.map_size_m / self.cell_size_m))
+
+    @property
+    def patch_cells(self) -> int:
+        """Patch radius in whole cells (the margin a window needs around it for the plane fits)."""
+        return int(np.ceil(self.patch_radius_m / self.cell_size_m - 1e-9))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Goodness map
+# ----------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GoodnessWindow:
+    """The evaluated map around the rover. Arrays are indexed ``[i, j]`` = world cell ``(ix0 + i, iy0 + j)``.
+
+    (Axis 0 runs east along world x, axis 1 north along world y; transpose for a north-up image.)
+    """
+
+    origin_cell: tuple[int, int]  # world cell index (ix0, iy0) of element [0, 0]
+    cell_size_m: float
+    goodness: np.ndarray  # in [0, 1]; 0 impassable; NaN unknown
+    elevation_m: np.ndarray  # height of the patch plane at the cell centre (world z); NaN unknown
+    tilt_deg: np.ndarray  # NaN unknown
+    roughness_m: np.ndarray  # RMS residual about the patch plane; NaN unknown
+    step_m: np.ndarray  # spread of the patch's elevations about its plane; NaN unknown
+    point_count: np.ndarray  # range points in the cell itself (int)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.goodness.shape
+
+    def cell_centres_xy(self) -> np.ndarray:
+        """(n, n, 2) world (x, y) of the cell centres."""
+        i, j = np.indices(self.shape)
+        cs = self.cell_size_m
+        return np.stack([(self.origin_cell[0] + i + 0.5) * cs, (self.origin_cell[1] + j + 0.5) * cs], axis=-1)
+
+    def cell_index(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Window indices (i, j) of world points (N, 2) and whether each lies inside the window."""
+        xy = np.atleast_2d(np.asarray(xy, dtype=float))
+        i = np.floor(xy[:, 0] / self.cell_size_m).astype(np.int64) - self.origin_cell[0]
+        j = np.floor(xy[:, 1] / self.cell_size_m).astype(np.int64) - self.origin_cell[1]
+        inside = (i >= 0) & (i < self.shape[0]) & (j >= 0) & (j < self.shape[1])
+        return i, j, inside
+
+    def goodness_at(self, xy: np.ndarray) -> np.ndarray:
+        """Goodness at world points (N, 2); NaN where unknown or outside the window."""
+        i, j, inside = self.cell_index(xy)
+        out = np.full(len(i), np.nan)
+        out[inside] = self.goodness[i[inside], j[inside]]
+        return out
+
+
+class GoodnessMap:
+    """World-fixed toroidal grid of per-cell range-point statistics (paper: "modulo map indexing").
+
+    World cell ``(ix, iy) = floor((x, y) / cell_size_m)`` lives in slot ``(ix mod N, iy mod N)``; each slot also
+    stores the cell index it holds, so a slot last written for a cell one map-width away reads as unknown rather
+    than as stale terrain. ``N`` covers the window plus the plane-fit margin, so no scrolling is ever needed.
+    """
+
+    def __init__(self, params: GestaltParams = GestaltParams()) -> None:
+        self.params = params
+        self.slots = params.window_cells + 2 * params.patch_cells + 2
+        n = self.slots
+        self.cell_ix = np.full((n, n), _NO_CELL, np.int64)
+        self.cell_iy = np.full((n, n), _NO_CELL, np.int64)
+        self.moments = np.zeros((len(_MOMENTS), n, n))
+        # z_min, its dx, dy from the cell centre; z_max, its dx, dy
+        self.extremes = np.zeros((6, n, n))
+
+    def _rover_cell(self, rover_xy: np.ndarray) -> tuple[int, int]:
+        cs = self.params.cell_size_m
+        return int(np.floor(rover_xy[0] / cs)), int(np.floor(rover_xy[1] / cs))
+
+    def update(self, points_world: np.ndarray, rover_xy: np.ndarray) -> int:
+        """Step 1: bin one range image's world points; cells it sees replace their old contents. Returns cells hit.
+
+        Points farther than the map reaches from ``rover_xy`` (about half a map width) are ignored; NaN rows too.
+        """
+        cs = self.params.cell_size_m
+        pts = np.asarray(points_world, dtype=float).reshape(-1, 3)
+        x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
+        rx, ry = self._rover_cell(np.asarray(rover_xy, dtype=float))
+        half = (self.slots - 1) // 2
+        with np.errstate(invalid="ignore"):
+            fx = np.floor(x / cs)
+            fy = np.floor(y / cs)
+            keep = (np.abs(fx - rx) <= half) & (np.abs(fy - ry) <= half) & np.isfinite(z)  # NaN compares False
+        x, y, z = x[keep], y[keep], z[keep]
+        ix, iy = fx[keep].astype(np.int64), fy[keep].astype(np.int64)
+        side = 2 * half + 1
+        local = (ix - rx + half) * side + (iy - ry + half)
+        dx = x - (ix + 0.5) * cs
+        dy = y - (iy + 0.5) * cs
+        weights = {"dx": dx, "dy": dy, "z": z, "dxdx": dx * dx, "dxdy": dx * dy, "dydy": dy * dy}
+        weights |= {"dxz": dx * z, "dyz": dy * z, "zz": z * z}
+        count = np.bincount(local, minlength=side * side)
+        hit = np.flatnonzero(count)
+        batch = np.empty((len(_MOMENTS), hit.size))
+        batch[0] = count[hit]
+        for k, name in enumerate(_MOMENTS[1:], start=1):
+            batch[k] = np.bincount(local, weights=weights[name], minlength=side * side)[hit]
+        # per-cell extreme elevations and where in the cell they are (for the plane-relative step)
+        extremes = np.empty((6, hit.size))
+        for row, reduce in ((0, np.minimum), (3, np.maximum)):
+            z_ext = np.full(side * side, np.inf if reduce is np.minimum else -np.inf)
+            reduce.at(z_ext, local, z)
+            at = np.flatnonzero(z == z_ext[local])
+            where_dx = np.zeros(side * side)
+            where_dy = np.zeros(side * side)
+            where_dx[local[at]] = dx[at]
+            where_dy[local[at]] = dy[at]
+            extremes[row : row + 3] = z_ext[hit], where_dx[hit], where_dy[hit]
+        cell_x = hit // side - half + rx
+        cell_y = hit % side - half + ry
+        sx, sy = cell_x % self.slots, cell_y % self.slots
+        self.cell_ix[sx, sy] = cell_x  # newer data overwrites older (paper)
+        self.cell_iy[sx, sy] = cell_y
+        self.moments[:, sx, sy] = batch
+        self.extremes[:, sx, sy] = extremes
+        return int(hit.size)
+
+    def _gather(self, ix0: int, iy0: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+        """Moments and extremes of world cells ``[ix0, ix0 + size) x [iy0, iy0 + size)``; empty where stale.
+
+        Empty cells have zero moments and z_min = +inf, z_max = -inf.
+        """
+        cx = np.arange(ix0, ix0 + size)
+        cy = np.arange(iy0, iy0 + size)
+        sx, sy = np.ix_(cx % self.slots, cy % self.slots)
+        current = (self.cell_ix[sx, sy] == cx[:, None]) & (self.cell_iy[sx, sy] == cy[None, :])
+        moments = np.where(current, self.moments[:, sx, sy], 0.0)
+        extremes = self.extremes[:, sx, sy]
+        extremes[0] = np.where(current, extremes[0], np.inf)
+        extremes[3] = np.where(current, extremes[3], -np.inf)
+        return moments, extremes
+
+    def evaluate(self, rover_xy: np.ndarray) -> GoodnessWindow:
+        """Step 2: tilt, roughness, step and goodness of every cell of the window centred on the rover."""
+        p = self.params
+        n, m, cs = p.window_cells, p.patch_cells, p.cell_size_m
+        rx, ry = self._rover_cell(np.asarray(rover_xy, dtype=float))
+        ix0, iy0 = rx - n // 2, ry - n // 2
+        moments, extremes = self._gather(ix0 - m, iy0 - m, n + 2 * m)
+        fit = fit_patch_planes(moments, p)
+        inner = (slice(m, m + n), slice(m, m + n))
+        a, b, c = (arr[inner] for arr in fit[:3])
+        tilt_deg = np.degrees(np.arctan(np.hypot(a, b)))
+        roughness_m = fit[3][inner]
+        step_m = patch_step_m(extremes, a, b, c, p)
+        count = moments[0][inner]
+        known = fit[4][inner] & (count >= p.min_points_per_cell)
+        goodness = goodness_from(tilt_deg, roughness_m, step_m, p)
+        unknown = np.where(known, 1.0, np.nan)
+        return GoodnessWindow(
+            origin_cell=(ix0, iy0),
+            cell_size_m=cs,
+            goodness=goodness * unknown,
+            elevation_m=c * unknown,
+            tilt_deg=tilt_deg * unknown,
+            roughness_m=roughness_m * unknown,
+            step_m=step_m * unknown,
+            point_count=count.astype(np.int64),
+        )
+
+
+def _patch_kernels(params: GestaltParams) -> dict[str, np.ndarray]:
+    """Disc kernel over cell offsets, and its products with the offsets (metres) for the moment shifts."""
+    m, cs = params.patch_cells, params.cell_size_m
+    o = np.arange(-m, m + 1) * cs
+    ox, oy = np.meshgrid(o, o, indexing="ij")  # axis 0 = x, axis 1 = y
+    disc = (ox**2 + oy**2 <= params.patch_radius_m**2 + 1e-12).astype(np.float64)
+    return {"1": disc, "x": disc * ox, "y": disc * oy, "xx": disc * ox * ox, "xy": disc * ox * oy, "yy": disc * oy * oy}
+
+
+def fit_patch_planes(moments: np.ndarray, params: GestaltParams) -> tuple[np.ndarray, ...]:
+    """Least-squares plane ``z = a x + b y + c`` through the points within ``patch_radius_m`` of each cell centre.
+
+    ``moments`` are the per-cell sums of ``_MOMENTS`` (offsets from each cell's own centre). A neighbour cell at
+    offset ``o`` contributes its sums shifted to the target cell's centre, e.g. ``sum (dx + o_x)^2 = S_dxdx +
+    2 o_x S_dx + o_x^2 n``; each term is one correlation of a moment image with the disc kernel times a power of
+    the offset. Returns ``(a, b, c, rms_residual_m, ok)`` per cell, ``c`` the plane height at the cell centre and
+    ``ok`` False where the patch has too few points or they do not span the plane.
+    """
+    k = _patch_kernels(params)
+    M = dict(zip(_MOMENTS, moments, strict=True))
+
+    def corr(img: np.ndarray, kernel: str) -> np.ndarray:
+        return cv2.filter2D(img, cv2.CV_64F, k[kernel], borderType=cv2.BORDER_CONSTANT)
+
+    n = corr(M["n"], "1")
+    sx = corr(M["dx"], "1") + corr(M["n"], "x")
+    sy = corr(M["dy"], "1") + corr(M["n"], "y")
+    sz = corr(M["z"], "1")
+    sxx = corr(M["dxdx"], "1") + 2 * corr(M["dx"], "x") + corr(M["n"], "xx")
+    syy = corr(M["dydy"], "1") + 2 * corr(M["dy"], "y") + corr(M["n"], "yy")
+    sxy = corr(M["dxdy"], "1") + corr(M["dx"], "y") + corr(M["dy"], "x") + corr(M["n"], "xy")
+    sxz = corr(M["dxz"], "1") + corr(M["z"], "x")
+    syz = corr(M["dyz"], "1") + corr(M["z"], "y")
+    szz = corr(M["zz"], "1")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_n = np.where(n > 0, 1.0 / n, 0.0)
+        mx, my, mz = sx * inv_n, sy * inv_n, sz * inv_n
+        cxx, cyy, cxy = sxx * inv_n - mx * mx, syy * inv_n - my * my, sxy * inv_n - mx * my
+        cxz, cyz, czz = sxz * inv_n - mx * mz, syz * inv_n - my * mz, szz * inv_n - mz * mz
+        det = cxx * cyy - cxy * cxy
+        # points must spread over at least a cell's width in every direction (smallest covariance eigenvalue)
+        lam_min = 0.5 * (cxx + cyy) - np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy**2)
+        ok = (n >= params.min_points_patch) & (lam_min >= params.cell_size_m**2 / 12.0)
+        safe_det = np.where(ok, det, 1.0)
+        a = np.where(ok, (cxz * cyy - cyz * cxy) / safe_det, 0.0)
+        b = np.where(ok, (cyz * cxx - cxz * cxy) / safe_det, 0.0)
+    c = mz - a * mx - b * my
+    rms = np.sqrt(np.maximum(czz - a * cxz - b * cyz, 0.0))
+    return a, b, c, rms, ok
+
+
+def patch_step_m(
+    extremes: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray, params: GestaltParams
+) -> np.ndarray:
+    """Spread of the patch's elevations about its plane: max(z - plane) - min(z - plane) over the disc.
+
+    Paper: "minimum and maximum elevation difference from the best fit plane". A disc-shaped max/min filter over
+    the neighbours' extreme points, each taken relative to the target cell's plane at that point's position, so a
+    clean plane of any tilt has step 0 and a 30 cm ledge anywhere in the patch has step ~0.3 m. ``extremes``
+    (z_min, its dx, dy, z_max, its dx, dy per cell) covers the window plus a ``patch_cells`` margin; ``a, b, c``
+    the window.
+    """
+    m, cs = params.patch_cells, params.cell_size_m
+    n = a.shape[0]
+    above = np.full(a.shape, -np.inf)
+    below = np.full(a.shape, np.inf)
+    for ox in range(-m, m + 1):
+        for oy in range(-m, m + 1):
+            if (ox * ox + oy * oy) * cs * cs > params.patch_radius_m**2 + 1e-12:
+                continue
+            nb = extremes[:, m + ox : m + ox + n, m + oy : m + oy + n]
+            low = nb[0] - (a * (ox * cs + nb[1]) + b * (oy * cs + nb[2]) + c)
+            high = nb[3] - (a * (ox * cs + nb[4]) + b * (oy * cs + nb[5]) + c)
+            np.maximum(above, high, out=above)
+            np.minimum(below, low, out=below)
+    with np.errstate(invalid="ignore"):
+        spread = above - below
+    return np.where(np.isfinite(spread), spread, np.nan)
+
+
+def goodness_from(
+    tilt_deg: np.ndarray, roughness_m: np.ndarray, step_m: np.ndarray, params: GestaltParams
+) -> np.ndarray:
+    """Goodness in [0, 1]: per factor 1 at or below its benign value, 0 at or beyond its limit; the worst factor."""
+
+    def ramp(x: np.ndarray, benign: float, limit: float) -> np.ndarray:
+        return np.clip((limit - x) / (limit - benign), 0.0, 1.0)
+
+    p = params
+    g = np.minimum(
+        ramp(tilt_deg, p.benign_tilt_deg, p.max_tilt_deg), ramp(roughness_m, p.benign_roughness_m, p.max_roughness_m)
+    )
+    return np.minimum(g, ramp(step_m, p.benign_step_m, p.max_step_m))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Arcs
+# ----------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Arc:
+    """A candidate steering command: a circular arc driven forward or backward, or a point turn.
+
+    ``poses_xy_yaw`` samples the rover's path in the rover frame at the start (x forward, y left, yaw left-positive)
+    up to ``look_ahead_m``; for a point turn the heading sweep at the origin.
+    """
+
+    curvature_per_m: float  # 1 / radius, positive turns left (for a point turn: 0)
+    direction: int  # +1 forward, -1 backward, 0 point turn
+    turn_rad: float  # point turns: signed heading change; arcs: heading change over the look-ahead
+    poses_xy_yaw: np.ndarray = field(repr=False)
+
+    @property
+    def name(self) -> str:
+        if self.direction == 0:
+            return f"turn_{'left' if self.turn_rad > 0 else 'right'}"
+        return f"{'fwd' if self.direction > 0 else 'back'}_k{self.curvature_per_m:+.3f}"
+
+
+def arc_pose(curvature_per_m: float, signed_distance_m: np.ndarray) -> np.ndarray:
+    """Rover-frame poses (x, y, yaw) after driving ``signed_distance_m`` (negative = backward) on a circle."""
+    s = np.asarray(signed_distance_m, dtype=float)
+    k = curvature_per_m
+    yaw = k * s
+    if abs(k) < 1e-9:
+        return np.stack([s, np.zeros_like(s), np.zeros_like(s)], axis=-1)
+    return np.stack([np.sin(yaw) / k, (1.0 - np.cos(yaw)) / k, yaw], axis=-1)
+
+
+def arcs(params: GestaltParams = GestaltParams()) -> list[Arc]:
+    """Paper: 23 forward arcs, 23 backward arcs and 2 point turns, curvatures symmetric about straight."""
+    p = params
+    ds = p.cell_size_m / 2
+    s = np.linspace(0.0, p.look_ahead_m, int(np.ceil(p.look_ahead_m / ds)) + 1)
+    out: list[Arc] = []
+    for direction, count in ((+1, p.n_forward_arcs), (-1, p.n_backward_arcs)):
+        for k in np.linspace(-p.max_curvature_per_m, p.max_curvature_per_m, count) if count > 1 else [0.0]:
+            k = 0.0 if abs(k) < 1e-12 else float(k)
+            out.append(Arc(k, direction, k * direction * p.look_ahead_m, arc_pose(k, direction * s)))
+    for sign in (+1, -1):
+        turn = sign * np.radians(p.point_turn_deg)
+        yaw = np.linspace(0.0, turn, 10)
+        out.append(Arc(0.0, 0, float(turn), np.stack([np.zeros(10), np.zeros(10), yaw], axis=-1)))
+    return out
+
+
+@dataclass(frozen=True)
+class _Footprint:
+    """Rover-frame sample points covering each arc's swept footprint, and the arc length at which each is reached.
+
+    ``core`` marks the samples that decide vetoes: within ``rover_half_width_m - patch_radius_m`` of the path (or
+    ``turn_radius_m - patch_radius_m`` of the centre for point turns). Goodness already grows every obstacle by the
+    patch radius, so a clear core means the whole footprint is clear of impassable *ground*.
+    """
+
+    points_xy: np.ndarray  # (n_arcs, n_samples, 2)
+    distance_m: np.ndarray  # (n_arcs, n_samples); inf for padding
+    core: np.ndarray  # (n_arcs, n_samples) bool
+
+
+def _footprints(arc_list: list[Arc], params: GestaltParams) -> _Footprint:
+    p = params
+    step = p.cell_size_m / 2
+    core_half_width = max(p.rover_half_width_m - p.patch_radius_m, step)
+    core_turn = max(p.turn_radius_m - p.patch_radius_m, step)
+    n_lat = int(np.ceil(2 * p.rover_half_width_m / step)) + 1
+    lateral = np.linspace(-p.rover_half_width_m, p.rover_half_width_m, n_lat)
+    g = np.arange(-p.turn_radius_m, p.turn_radius_m + 1e-9, step)
+    gx, gy = np.meshgrid(g, g, indexing="ij")
+    r = np.hypot(gx, gy)
+    in_disc = r <= p.turn_radius_m
+    turn_pts = np.stack([gx[in_disc], gy[in_disc]], axis=-1)
+    per_arc: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    for arc in arc_list:
+        if arc.direction == 0:
+            per_arc.append((turn_pts, np.zeros(len(turn_pts)), r[in_disc] <= core_turn))
+            continue
+        poses = arc.poses_xy_yaw
+        s = np.linspace(0.0, p.look_ahead_m, len(poses))  # poses are evenly spaced in arc length
+        normal = np.stack([-np.sin(poses[:, 2]), np.cos(poses[:, 2])], axis=-1)
+        pts = poses[:, None, :2] + lateral[None, :, None] * normal[:, None, :]
+        core = np.broadcast_to(np.abs(lateral) <= core_half_width + 1e-9, pts.shape[:2])
+        per_arc.append((pts.reshape(-1, 2), np.repeat(s, n_lat), core.reshape(-1)))
+    size = max(len(d) for _, d, _ in per_arc)
+    points = np.zeros((len(arc_list), size, 2))
+    dist = np.full((len(arc_list), size), np.inf)
+    core = np.zeros((len(arc_list), size), bool)
+    for a, (pts, d, c) in enumerate(per_arc):
+        points[a, : len(d)], dist[a, : len(d)], core[a, : len(d)] = pts, d, c
+    return _Footprint(points, dist, core)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Votes and arbiter
+# ----------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ArcVotes:
+    """Traversability votes of all arcs (paper: "a set of traversability votes for all arcs")."""
+
+    vote: np.ndarray  # (n_arcs,) weighted mean goodness over the swept footprint, in [0, 1]; 0 where vetoed
+    vetoed: np.ndarray  # (n_arcs,) bool: an unknown or impassable cell on the near part
+    cells: np.ndarray  # (n_arcs, n, n) arc length (m) at which the footprint first covers each window cell; inf
+
+
+def vote_arcs(
+    window: GoodnessWindow,
+    pose_xy_yaw: np.ndarray,
+    arc_list: list[Arc],
+    params: GestaltParams = GestaltParams(),
+    footprint: _Footprint | None = None,
+) -> ArcVotes:
+    """Step 3: per arc, the weighted mean goodness of the cells its swept footprint covers.
+
+    A cell's weight is ``exp(-s / weight_decay_m)`` with ``s`` the arc length at which the footprint first reaches
+    it (paper: "nearby cells given higher weight"). Unknown cells count ``unknown_goodness``, except those reaching
+    within ``assume_safe_radius_m`` of the rover, which it is standing on: they count as benign. An unknown or
+    impassable cell on the near part (arc length up to ``near_distance_m``) of the footprint's core vetoes the arc
+    (vote 0); the core is the footprint shrunk by the patch radius (see ``_Footprint``).
+    """
+    p = params
+    fp = footprint if footprint is not None else _footprints(arc_list, p)
+    x, y, yaw = (float(v) for v in pose_xy_yaw)
+    c, s = np.cos(yaw), np.sin(yaw)
+    world_x = x + c * fp.points_xy[..., 0] - s * fp.points_xy[..., 1]
+    world_y = y + s * fp.points_xy[..., 0] + c * fp.points_xy[..., 1]
+    n_arcs = len(arc_list)
+    n0, n1 = window.shape
+    i, j, inside = window.cell_index(np.stack([world_x.reshape(-1), world_y.reshape(-1)], axis=1))
+    flat = (np.repeat(np.arange(n_arcs), fp.points_xy.shape[1]) * n0 + i.clip(0, n0 - 1)) * n1 + j.clip(0, n1 - 1)
+    dist = np.where(inside, fp.distance_m.reshape(-1), np.inf)
+    first = np.full(n_arcs * n0 * n1, np.inf)
+    np.minimum.at(first, flat, dist)
+    first_core = np.full(n_arcs * n0 * n1, np.inf)
+    core = fp.core.reshape(-1)
+    np.minimum.at(first_core, flat[core], dist[core])
+    first = first.reshape(n_arcs, n0, n1)
+    first_core = first_core.reshape(n_arcs, n0, n1)
+    # goodness as the votes see it: unknown -> unknown_goodness, or benign under the rover
+    g = window.goodness
+    unknown = np.isnan(g)
+    centres = window.cell_centres_xy()
+    reach = p.assume_safe_radius_m + p.cell_size_m / np.sqrt(2.0)  # cell centre within radius + half a diagonal
+    under_rover = np.hypot(centres[..., 0] - x, centres[..., 1] - y) <= reach
+    g_vote = np.where(unknown, np.where(under_rover, 1.0, p.unknown_goodness), g)
+    bad = (unknown & ~under_rover) | (g <= p.impassable_goodness)
+    vetoed = ((first_core <= p.near_distance_m) & bad[None]).any(axis=(1, 2))
+    covered = np.isfinite(first)
+    w = np.where(covered, np.exp(-np.where(covered, first, 0.0) / p.weight_decay_m), 0.0)
+    total = w.sum(axis=(1, 2))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vote = np.where(total > 0, (w * g_vote[None]).sum(axis=(1, 2)) / total, 0.0)
+    vetoed |= total <= 0
+    return ArcVotes(np.where(vetoed, 0.0, vote), vetoed, first)
+
+
+def waypoint_votes(
+    arc_list: list[Arc], pose_xy_yaw: np.ndarray, goal_xy: np.ndarray, params: GestaltParams = GestaltParams()
+) -> np.ndarray:
+    """Step 4a: how much each arc helps reach the goal (paper: the arbiter "takes input from waypoints"), in [0, 1].
+
+    Judged where the rover will be after this cycle's drive (``step_distance_m`` along the arc; a point turn's full
+    turn): (a) progress, the distance to the goal gained over the distance driven (-1..1; 0 for point turns), and
+    (b) heading, the cosine of the angle between the rover's heading and the bearing to the goal from there;
+    weighted by ``progress_weight`` and ``heading_weight`` and mapped to [0, 1].
+    """
+    p = params
+    x, y, yaw = (float(v) for v in pose_xy_yaw)
+    goal = np.asarray(goal_xy, dtype=float)
+    ends = np.array(
+        [
+            a.poses_xy_yaw[-1] if a.direction == 0 else arc_pose(a.curvature_per_m, a.direction * p.step_distance_m)
+            for a in arc_list
+        ]
+    )
+    c, s = np.cos(yaw), np.sin(yaw)
+    ex = x + c * ends[:, 0] - s * ends[:, 1]
+    ey = y + s * ends[:, 0] + c * ends[:, 1]
+    eyaw = yaw + ends[:, 2]
+    d_now = np.hypot(goal[0] - x, goal[1] - y)
+    d_end = np.hypot(goal[0] - ex, goal[1] - ey)
+    driven = np.array([0.0 if a.direction == 0 else p.step_distance_m for a in arc_list])
+    progress = np.where(driven > 0, (d_now - d_end) / np.maximum(driven, 1e-9), 0.0)
+    bearing = np.arctan2(goal[1] - ey, goal[0] - ex)
+    heading = np.where(d_end > 1e-6, np.cos(bearing - eyaw), 1.0)
+    mix = (p.progress_weight * progress + p.heading_weight * heading) / (p.progress_weight + p.heading_weight)
+    return np.clip(0.5 * (1.0 + mix), 0.0, 1.0)
+
+
+def arbitrate(
+    trav: ArcVotes, wp_votes: np.ndarray, directions: np.ndarray, params: GestaltParams = GestaltParams()
+) -> tuple[int | None, np.ndarray]:
+    """Step 4b, the arbiter: the arc with the best weighted sum of traversability and waypoint votes.
+
+    ``score = traversability_weight * trav + waypoint_weight * wp - penalty(direction)`` (``directions``: +1
+    forward, -1 backward, 0 point turn). Vetoed arcs and arcs voted below ``min_traversability_vote`` are out.
+    Returns the winner's index (None when no arc is safe: the rover must stop) and every score (NaN where out).
+    """
+    p = params
+    directions = np.asarray(directions)
+    penalty = np.where(directions == 0, p.point_turn_penalty, np.where(directions < 0, p.backward_penalty, 0.0))
+    allowed = ~trav.vetoed & (trav.vote >= p.min_traversability_vote)
+    score = p.traversability_weight * trav.vote + p.waypoint_weight * np.asarray(wp_votes) - penalty
+    score = np.where(allowed, score, np.nan)
+    if not allowed.any():
+        return None, score
+    return int(np.nanargmax(score)), score
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# One GESTALT cycle
+# ----------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Decision:
+    """Everything one cycle decided and why, for the driver and for a logger to draw."""
+
+    arc: Arc | None  # None: no safe arc, stop
+    arc_index: int | None
+    votes: ArcVotes
+    waypoint_votes: np.ndarray
+    scores: np.ndarray  # arbiter score per arc, NaN where vetoed or too poor
+    window: GoodnessWindow
+    reason: str
+
+
+class GestaltPlanner:
+    """GESTALT: keeps the goodness map between cycles; :meth:`step` runs one cycle."""
+
+    def __init__(self, params: GestaltParams = GestaltParams()) -> None:
+        self.params = params
+        self.map = GoodnessMap(params)
+        self.arcs = arcs(params)
+        self._footprint = _footprints(self.arcs, params)
+        self._directions = np.array([a.direction for a in self.arcs])
+
+    def step(self, points_world: np.ndarray, pose_xy_yaw: np.ndarray, goal_xy: np.ndarray) -> Decision:
+        """Update map -> evaluate goodness -> vote -> arbitrate. ``points_world`` (N, 3) may be empty."""
+        pose = np.asarray(pose_xy_yaw, dtype=float)
+        self.map.update(points_world, pose[:2])
+        window = self.map.evaluate(pose[:2])
+        trav = vote_arcs(window, pose, self.arcs, self.params, self._footprint)
+        wp = waypoint_votes(self.arcs, pose, goal_xy, self.params)
+        best, score = arbitrate(trav, wp, self._directions, self.params)
+        if best is None:
+            reason = "no safe arc: every arc is vetoed or below min_traversability_vote"
+            return Decision(None, None, trav, wp, score, window, reason)
+        arc = self.arcs[best]
+        reason = f"{arc.name}: traversability {trav.vote[best]:.2f}, waypoint {wp[best]:.2f}"
+        return Decision(arc, best, trav, wp, score, window, reason)

@@ -1,0 +1,108 @@
+"""GESTALT autonomous navigation in the simulator (MER autonav, seed 001 section 4; REFERENCE.md section 3.3).
+
+Each cycle: hazcam stereo pair -> SAD stereo range image -> points in the world frame *via the onboard pose*
+(never the truth) -> goodness map update -> arc votes + waypoint votes -> the winning arc is driven for
+``step_m`` -> stop, image, repeat; until the onboard pose is within ``tolerance_m`` of the goal or no arc is safe.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from nav.camera import transform_points
+from nav.gestalt import Arc as GestaltArc
+from nav.gestalt import GestaltParams, GestaltPlanner, arc_pose
+from nav.stereo import StereoParams, range_image
+from rover_sim.drive import Arc, Primitive, Straight, TurnInPlace
+
+if TYPE_CHECKING:
+    from rover_sim.runner import Mission
+    from rover_sim.scenario import AutonavCmd
+
+HAZCAM = "hazcam_front"
+MAX_RANGE_M = 6.0  # hazcam look-ahead on MER: 3-4 m useful; farther points are too coarse to keep
+
+
+@dataclass
+class AutonavStats:
+    cycles: int = 0
+    cycle_ms: list[float] = field(default_factory=list)  # stereo + map + votes
+    outcome: str = ""
+
+
+def primitive_for(arc: GestaltArc, step_m: float) -> Primitive:
+    """The drive command for a GESTALT arc: point turn, straight or Ackermann arc, ``step_m`` long."""
+    if arc.direction == 0:
+        return TurnInPlace(arc.turn_rad)
+    if abs(arc.curvature_per_m) < 1e-6:
+        return Straight(arc.direction * step_m)
+    return Arc(1.0 / arc.curvature_per_m, arc.direction * step_m)
+
+
+def _heading(R: np.ndarray) -> float:
+    return float(math.atan2(R[1, 0], R[0, 0]))
+
+
+def run_autonav(mission: Mission, cmd: AutonavCmd, params: GestaltParams | None = None) -> AutonavStats:
+    planner = GestaltPlanner(params or GestaltParams())
+    stereo = StereoParams()
+    stats = AutonavStats()
+    mission.autonav_stats = stats
+    rig = mission.renderer.rig(HAZCAM)  # body-fixed, calibrated once
+    mission.rec.log_camera(HAZCAM, rig, mission.sim.time_s)
+    goal = np.array([cmd.x_m, cmd.y_m])
+    for _ in range(cmd.max_cycles):
+        pose = mission.onboard.pose
+        if np.linalg.norm(goal - pose.position_xyz_m[:2]) <= cmd.tolerance_m:
+            stats.outcome = "goal reached (onboard pose)"
+            mission._event(f"autonav: {stats.outcome}")
+            return stats
+        frame = mission.renderer.render_pair(HAZCAM)
+        t0 = time.perf_counter()
+        ri = range_image(frame.left, frame.right, rig, stereo)
+        pts = ri.points_rover_m()
+        pts = pts[np.linalg.norm(pts[:, :2], axis=1) < MAX_RANGE_M]
+        T = pose.as_matrix()
+        pts_world = transform_points(T, pts)
+        yaw = _heading(T[:3, :3])
+        decision = planner.step(pts_world, np.array([T[0, 3], T[1, 3], yaw]), goal)
+        stats.cycle_ms.append((time.perf_counter() - t0) * 1e3)
+        stats.cycles += 1
+        _log_cycle(mission, frame, ri, pts_world, decision, planner.arcs, T)
+        if decision.arc is None:
+            stats.outcome = "no safe arc"
+            mission._event(f"autonav stopped: {decision.reason}", "WARN")
+            return stats
+        mission._event(f"autonav cycle {stats.cycles}: {decision.reason}")
+        dist = float(np.linalg.norm(goal - T[:2, 3]))
+        mission._primitive(primitive_for(decision.arc, min(cmd.step_m, max(dist, 0.35))))
+        if mission.vo is not None:
+            mission._vo_update()
+    stats.outcome = "cycle budget used up"
+    mission._event(f"autonav: {stats.outcome}", "WARN")
+    return stats
+
+
+def _log_cycle(
+    mission: Mission, frame, ri, pts_world: np.ndarray, decision, arcs: list[GestaltArc], T_world_rover: np.ndarray
+) -> None:
+    rec, t, step = mission.rec, mission.sim.time_s, mission.step
+    rec.log_stereo_images(HAZCAM, t, step, frame.left, frame.right, ri.disparity_px)
+    rec.log_points("stereo", t, step, pts_world)
+    w = decision.window
+    g = w.goodness.ravel()
+    xy = w.cell_centres_xy().reshape(-1, 2)
+    z = np.nan_to_num(w.elevation_m.ravel(), nan=T_world_rover[2, 3] - 0.5)
+    rec.log_goodness(t, step, xy, z, g, w.cell_size_m)
+    polylines, votes = [], []
+    for i, arc in enumerate(arcs):
+        local = arc.poses_xy_yaw[:, :2] if arc.direction != 0 else arc_pose(0.0, np.zeros(2))[:, :2]
+        world = local @ T_world_rover[:2, :2].T + T_world_rover[:2, 3]
+        polylines.append(np.column_stack([world, np.full(len(world), T_world_rover[2, 3] - 0.45)]))
+        votes.append(None if decision.votes.vetoed[i] else float(decision.votes.vote[i]))
+    rec.log_arcs(t, step, polylines, votes, decision.arc_index)

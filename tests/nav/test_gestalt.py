@@ -1,0 +1,374 @@
+"""GESTALT (nav.gestalt): goodness map on synthetic heightfields, toroidal map, arcs, votes and arbiter."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from nav.gestalt import (
+    Arc,
+    ArcVotes,
+    GestaltParams,
+    GestaltPlanner,
+    GoodnessMap,
+    GoodnessWindow,
+    arbitrate,
+    arc_pose,
+    arcs,
+    vote_arcs,
+    waypoint_votes,
+)
+
+P = GestaltParams()
+Heightfield = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def point_cloud(
+    height: Heightfield,
+    x_range: tuple[float, float],
+    y_range: tuple[float, float],
+    points_per_m2: float = 600.0,
+    noise_m: float = 0.01,
+    seed: int = 0,
+) -> np.ndarray:
+    """Range points sampled uniformly over a heightfield, with elevation noise: (N, 3) world frame."""
+    rng = np.random.default_rng(seed)
+    n = int(points_per_m2 * (x_range[1] - x_range[0]) * (y_range[1] - y_range[0]))
+    x = rng.uniform(*x_range, n)
+    y = rng.uniform(*y_range, n)
+    return np.stack([x, y, height(x, y) + rng.normal(0.0, noise_m, n)], axis=1)
+
+
+def flat(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return np.zeros_like(x)
+
+
+def with_rock(center_xy: tuple[float, float], radius_m: float, height_m: float) -> Heightfield:
+    """Flat ground with a hemispheroidal rock."""
+
+    def h(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        r2 = ((x - center_xy[0]) ** 2 + (y - center_xy[1]) ** 2) / radius_m**2
+        return height_m * np.sqrt(np.clip(1.0 - r2, 0.0, None))
+
+    return h
+
+
+def cell_value(window: GoodnessWindow, array: np.ndarray, xy: tuple[float, float]) -> float:
+    i, j, inside = window.cell_index(np.array([xy]))
+    assert inside[0]
+    return float(array[i[0], j[0]])
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Goodness
+# --------------------------------------------------------------------------------------------------------------
+
+SLOPE_DEG = 25.0
+
+
+def three_regions(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """y < -1.5: flat; |y| < 1: a 25 deg slope rising along x; y > 1.5: a 30 cm ledge at x = 2."""
+    z = np.zeros_like(x)
+    z = np.where(np.abs(y) < 1.0, np.tan(np.radians(SLOPE_DEG)) * x, z)
+    return np.where((y > 1.5) & (x > 2.0), 0.30, z)
+
+
+@pytest.fixture(scope="module")
+def gestalt_regions() -> GoodnessWindow:
+    gmap = GoodnessMap(P)
+    gmap.update(point_cloud(three_regions, (-4.0, 4.0), (-4.5, 4.5)), np.zeros(2))
+    return gmap.evaluate(np.zeros(2))
+
+
+def test_goodness_orders_flat_slope_step(gestalt_regions: GoodnessWindow) -> None:
+    w = gestalt_regions
+    g_flat = cell_value(w, w.goodness, (1.0, -3.0))
+    g_slope = cell_value(w, w.goodness, (1.0, 0.0))
+    g_step = cell_value(w, w.goodness, (2.1, 3.0))
+    assert g_flat > g_slope > g_step
+    assert g_flat == 1.0
+    assert g_step == 0.0  # impassable
+    assert cell_value(w, w.tilt_deg, (1.0, 0.0)) == pytest.approx(SLOPE_DEG, abs=1.0)
+    assert cell_value(w, w.step_m, (2.1, 3.0)) == pytest.approx(0.30, abs=0.06)
+    assert cell_value(w, w.goodness, (3.5, 3.0)) == 1.0  # the ledge's flat top, beyond the patch radius
+
+
+def test_ledge_makes_a_band_one_patch_radius_wide(gestalt_regions: GoodnessWindow) -> None:
+    """Every cell whose patch reaches the ledge is impassable; cells farther away are not."""
+    w = gestalt_regions
+    xs = np.arange(0.5, 3.6, P.cell_size_m) + 0.1
+    g = np.array([cell_value(w, w.goodness, (x, 3.0)) for x in xs])
+    dist = np.abs(xs - 2.0)
+    assert (g[dist < P.patch_radius_m - 0.1] == 0.0).all()
+    assert (g[dist > P.patch_radius_m + 0.15] == 1.0).all()
+
+
+def test_clean_plane_has_exact_tilt_no_roughness_no_step() -> None:
+    a, b = np.tan(np.radians(10.0)), np.tan(np.radians(-8.0))
+    gmap = GoodnessMap(P)
+    gmap.update(point_cloud(lambda x, y: a * x + b * y + 3.0, (-3, 3), (-3, 3), noise_m=0.0), np.zeros(2))
+    w = gmap.evaluate(np.zeros(2))
+    expected = np.degrees(np.arctan(np.hypot(a, b)))
+    known = np.isfinite(w.goodness)
+    assert known.sum() > 500
+    np.testing.assert_allclose(w.tilt_deg[known], expected, atol=1e-6)
+    assert np.nanmax(w.roughness_m) < 1e-6 and np.nanmax(w.step_m) < 1e-6
+    centres = w.cell_centres_xy()
+    np.testing.assert_allclose(
+        w.elevation_m[known], (a * centres[..., 0] + b * centres[..., 1] + 3.0)[known], atol=1e-6
+    )
+    g = (P.max_tilt_deg - expected) / (P.max_tilt_deg - P.benign_tilt_deg)
+    np.testing.assert_allclose(w.goodness[known], g, atol=1e-6)
+
+
+def test_cells_without_enough_points_are_unknown() -> None:
+    gmap = GoodnessMap(P)
+    cloud = point_cloud(flat, (0.0, 3.0), (-1.0, 1.0))
+    sparse = np.array([[-2.05, 0.05, 0.0], [-2.1, 0.1, 0.0]])  # 2 points in one cell: below min_points_per_cell
+    gmap.update(np.vstack([cloud, sparse, [[np.nan, 0.0, 0.0]]]), np.zeros(2))
+    w = gmap.evaluate(np.zeros(2))
+    assert cell_value(w, w.goodness, (1.5, 0.0)) == 1.0
+    assert np.isnan(cell_value(w, w.goodness, (-2.1, 0.1)))
+    assert np.isnan(cell_value(w, w.goodness, (-3.0, 3.0)))
+    assert cell_value(w, w.point_count, (-2.1, 0.1)) == 2
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Toroidal map
+# --------------------------------------------------------------------------------------------------------------
+
+
+def test_toroidal_map_never_returns_data_from_the_wrong_place() -> None:
+    gmap = GoodnessMap(P)
+    gmap.update(point_cloud(flat, (-5, 5), (-5, 5)), np.array([0.0, 0.0]))
+    # 12 m east: this scan only covers the north half; its slots alias the first scan's cells
+    far = np.array([12.0, 0.0])
+    tilted = point_cloud(lambda x, y: 0.3 * (x - 12.0) + 1.0, (7, 17), (0.0, 5), seed=1)
+    gmap.update(tilted, far)
+    w = gmap.evaluate(far)
+    assert np.isnan(cell_value(w, w.goodness, (12.0, -2.0)))  # never seen here, though its slot holds old data
+    assert cell_value(w, w.tilt_deg, (12.0, 2.0)) == pytest.approx(np.degrees(np.arctan(0.3)), abs=0.5)
+    # back home: the north half was overwritten by the far scan (unknown now), the south half is still there
+    home = gmap.evaluate(np.array([0.0, 0.0]))
+    assert np.isnan(cell_value(home, home.goodness, (1.0, 2.0)))
+    assert cell_value(home, home.goodness, (1.0, -2.0)) == 1.0
+    assert cell_value(home, home.elevation_m, (1.0, -2.0)) == pytest.approx(0.0, abs=0.01)
+
+
+def test_newer_data_overwrites_older() -> None:
+    gmap = GoodnessMap(P)
+    gmap.update(point_cloud(flat, (-3, 3), (-3, 3)), np.zeros(2))
+    gmap.update(point_cloud(lambda x, y: np.full_like(x, 0.5), (0.0, 3), (-3, 3), seed=2), np.zeros(2))
+    w = gmap.evaluate(np.zeros(2))
+    assert cell_value(w, w.elevation_m, (2.0, 0.0)) == pytest.approx(0.5, abs=0.01)  # new
+    assert cell_value(w, w.elevation_m, (-2.0, 0.0)) == pytest.approx(0.0, abs=0.01)  # old, not seen again
+    assert cell_value(w, w.goodness, (0.1, 0.0)) == 0.0  # the seam is a 50 cm step
+
+
+def test_map_window_follows_the_rover() -> None:
+    gmap = GoodnessMap(P)
+    gmap.update(point_cloud(flat, (-1, 9), (-3, 3)), np.array([4.0, 0.0]))
+    w = gmap.evaluate(np.array([4.0, 0.0]))
+    assert w.shape == (P.window_cells, P.window_cells)
+    centres = w.cell_centres_xy()
+    assert centres[..., 0].min() == pytest.approx(4.0 - 5.0 + 0.1)
+    assert centres[..., 0].max() == pytest.approx(4.0 + 5.0 - 0.1)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Arcs
+# --------------------------------------------------------------------------------------------------------------
+
+
+def test_arc_set_geometry() -> None:
+    arc_list = arcs(P)
+    fwd = [a for a in arc_list if a.direction == 1]
+    back = [a for a in arc_list if a.direction == -1]
+    turns = [a for a in arc_list if a.direction == 0]
+    assert (len(fwd), len(back), len(turns)) == (23, 23, 2)
+    k = np.array([a.curvature_per_m for a in fwd])
+    np.testing.assert_allclose(np.sort(k), np.sort(-k), atol=1e-12)  # symmetric left/right
+    assert 0.0 in k and np.abs(k).max() == pytest.approx(P.max_curvature_per_m)
+    for a in fwd:
+        assert a.poses_xy_yaw[-1, 0] > 0 and (a.poses_xy_yaw[:, 0] >= -1e-9).all()
+        assert np.sign(a.poses_xy_yaw[-1, 1]) == np.sign(a.curvature_per_m)  # positive curvature turns left
+        steps = np.linalg.norm(np.diff(a.poses_xy_yaw[:, :2], axis=0), axis=1).sum()
+        assert steps == pytest.approx(P.look_ahead_m, rel=0.01)
+    for a in back:
+        assert a.poses_xy_yaw[-1, 0] < 0 and (a.poses_xy_yaw[:, 0] <= 1e-9).all()
+    assert sorted(np.degrees([a.turn_rad for a in turns])) == pytest.approx([-P.point_turn_deg, P.point_turn_deg])
+    for a in turns:
+        assert np.abs(a.poses_xy_yaw[:, :2]).max() == 0.0
+
+
+def test_arc_pose_is_a_circle() -> None:
+    s = np.linspace(0, 3, 31)
+    p = arc_pose(0.5, s)
+    np.testing.assert_allclose(np.hypot(p[:, 0], p[:, 1] - 2.0), 2.0, atol=1e-12)  # centre (0, 1/k)
+    np.testing.assert_allclose(p[:, 2], 0.5 * s)
+    np.testing.assert_allclose(arc_pose(0.0, s)[:, 0], s)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Votes and arbiter on synthetic windows
+# --------------------------------------------------------------------------------------------------------------
+
+
+def synthetic_window(goodness: float = 1.0) -> GoodnessWindow:
+    """A window centred on the origin with uniform goodness (arrays filled in by the tests)."""
+    n = P.window_cells
+    full = np.full((n, n), goodness)
+    zeros = np.zeros((n, n))
+    return GoodnessWindow((-n // 2, -n // 2), P.cell_size_m, full, zeros, zeros, zeros, zeros, zeros.astype(int))
+
+
+def test_nearer_obstacles_cost_more() -> None:
+    arc_list = arcs(P)
+    straight = next(i for i, a in enumerate(arc_list) if a.direction == 1 and a.curvature_per_m == 0)
+    votes = []
+    for x_obstacle in (1.9, 2.7):  # both beyond near_distance_m
+        w = synthetic_window()
+        i, j, _ = w.cell_index(np.array([[x_obstacle, -0.4], [x_obstacle, 0.4]]))
+        w.goodness[i[0] : i[1] + 1, j[0] : j[1] + 1] = 0.0
+        v = vote_arcs(w, np.zeros(3), arc_list, P)
+        assert not v.vetoed[straight]
+        votes.append(v.vote[straight])
+    assert votes[0] < votes[1] < 1.0
+
+
+def test_unknown_or_impassable_near_cells_veto() -> None:
+    arc_list = arcs(P)
+    unknown = synthetic_window(np.nan)
+    v = vote_arcs(unknown, np.zeros(3), arc_list, P)
+    is_turn = np.array([a.direction == 0 for a in arc_list])
+    assert v.vetoed[~is_turn].all()  # unknown ground beyond the rover's own footprint
+    assert not v.vetoed[is_turn].any()  # it may turn where it stands
+    w = synthetic_window()
+    i, j, _ = w.cell_index(np.array([[1.0, 0.0]]))
+    w.goodness[i[0], j[0]] = 0.0
+    v = vote_arcs(w, np.zeros(3), arc_list, P)
+    straight = next(k for k, a in enumerate(arc_list) if a.direction == 1 and a.curvature_per_m == 0)
+    assert v.vetoed[straight] and v.vote[straight] == 0.0
+    assert v.vetoed.sum() < len(arc_list) // 2
+
+
+def test_votes_follow_the_pose() -> None:
+    """An obstacle 1 m north blocks the straight arc of a rover facing north, not of one facing east."""
+    arc_list = arcs(P)
+    straight = next(k for k, a in enumerate(arc_list) if a.direction == 1 and a.curvature_per_m == 0)
+    w = synthetic_window()
+    i, j, _ = w.cell_index(np.array([[0.0, 1.0]]))
+    w.goodness[i[0], j[0]] = 0.0
+    assert vote_arcs(w, np.array([0.0, 0.0, np.pi / 2]), arc_list, P).vetoed[straight]
+    assert not vote_arcs(w, np.array([0.0, 0.0, 0.0]), arc_list, P).vetoed[straight]
+
+
+def test_waypoint_votes_prefer_arcs_towards_the_goal() -> None:
+    arc_list = arcs(P)
+    fwd = [k for k, a in enumerate(arc_list) if a.direction == 1]
+    k = np.array([arc_list[i].curvature_per_m for i in fwd])
+    ahead = waypoint_votes(arc_list, np.zeros(3), np.array([8.0, 0.0]), P)
+    assert arc_list[int(np.argmax(ahead))].curvature_per_m == 0.0 and arc_list[int(np.argmax(ahead))].direction == 1
+    left = waypoint_votes(arc_list, np.zeros(3), np.array([3.0, 4.0]), P)[fwd]
+    assert left[k > 0].mean() > left[k < 0].mean()
+    behind = waypoint_votes(arc_list, np.zeros(3), np.array([-8.0, 0.5]), P)
+    straight = next(i for i in fwd if arc_list[i].curvature_per_m == 0.0)
+    turn_left, turn_right = (i for i, a in enumerate(arc_list) if a.direction == 0)
+    assert behind[straight] < 0.01 and behind[fwd].max() < behind[turn_right] < behind[turn_left]
+    assert ((ahead >= 0) & (ahead <= 1)).all()
+
+
+def test_arbitrate() -> None:
+    trav = ArcVotes(np.array([0.9, 0.8, 0.1, 0.95, 1.0]), np.array([0, 0, 0, 1, 0], bool), np.zeros((5, 1, 1)))
+    wp = np.array([0.2, 0.9, 1.0, 1.0, 0.9])
+    best, score = arbitrate(trav, wp, np.array([1, 1, 1, 1, 0]), P)
+    wt, ww = P.traversability_weight, P.waypoint_weight
+    assert best == 1  # 0.8 / 0.9 beats 0.9 / 0.2 and, through the point-turn penalty, the turn's 1.0 / 0.9
+    assert np.isnan(score[2]) and np.isnan(score[3])  # too poor, vetoed
+    np.testing.assert_allclose(score[[0, 1]], wt * trav.vote[[0, 1]] + ww * wp[[0, 1]])
+    assert score[4] == pytest.approx(wt * 1.0 + ww * 0.9 - P.point_turn_penalty)
+    none, _ = arbitrate(ArcVotes(np.zeros(2), np.array([True, True]), np.zeros((2, 1, 1))), np.ones(2), np.ones(2), P)
+    assert none is None
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Whole cycles on point clouds
+# --------------------------------------------------------------------------------------------------------------
+
+
+def drive(arc: Arc, pose: np.ndarray, distance_m: float) -> np.ndarray:
+    """World pose after driving ``distance_m`` along ``arc`` from ``pose``."""
+    rel = arc_pose(arc.curvature_per_m, np.array([arc.direction * distance_m]))[0]
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return np.array([pose[0] + c * rel[0] - s * rel[1], pose[1] + s * rel[0] + c * rel[1], pose[2] + rel[2]])
+
+
+def test_rock_ahead_vetoes_straight_and_a_side_arc_still_heads_for_the_goal() -> None:
+    planner = GestaltPlanner(P)
+    cloud = point_cloud(with_rock((2.2, 0.0), 0.35, 0.40), (-1.0, 9.0), (-4.0, 4.0))
+    goal = np.array([6.0, 0.0])
+    pose = np.zeros(3)
+    d = planner.step(cloud, pose, goal)
+    straight = next(k for k, a in enumerate(planner.arcs) if a.direction == 1 and a.curvature_per_m == 0)
+    assert d.votes.vetoed[straight]
+    assert d.arc is not None and d.arc.direction == 1 and d.arc.curvature_per_m != 0.0
+    after = drive(d.arc, pose, P.step_distance_m)
+    assert np.hypot(*(goal - after[:2])) < np.hypot(*goal) - 0.3  # made progress towards the goal
+    assert "traversability" in d.reason
+    # drive, image (the same terrain), repeat: the rover gets round the rock to the goal
+    for _ in range(25):
+        pose = drive(d.arc, pose, P.step_distance_m) if d.arc.direction else pose + [0.0, 0.0, d.arc.turn_rad]
+        assert np.hypot(pose[0] - 2.2, pose[1]) > 0.35 + 0.65  # wheels (0.55-0.63 m out) never on the rock
+        if np.hypot(*(goal - pose[:2])) < 0.75:
+            break
+        d = planner.step(cloud, pose, goal)
+        assert d.arc is not None
+    assert np.hypot(*(goal - pose[:2])) < 0.75
+
+
+def test_point_turn_when_everything_ahead_is_blocked_and_the_goal_is_behind() -> None:
+    def ridge(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.where((x > 1.4) & (x < 1.8), 0.5, 0.0)
+
+    planner = GestaltPlanner(P)
+    cloud = point_cloud(ridge, (-0.5, 5.0), (-4.5, 4.5))  # nothing seen behind the rover
+    d = planner.step(cloud, np.zeros(3), np.array([-5.0, 0.5]))
+    assert d.arc is not None and d.arc.direction == 0
+    assert d.arc.turn_rad > 0  # towards the goal, which is behind and slightly left
+    fwd = np.array([a.direction == 1 for a in planner.arcs])
+    back = np.array([a.direction == -1 for a in planner.arcs])
+    assert d.votes.vetoed[fwd].all() and d.votes.vetoed[back].all()
+
+
+def test_no_safe_arc_returns_none() -> None:
+    def ring(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        r = np.hypot(x, y)
+        return np.where((r > 0.9) & (r < 1.3), 0.5, 0.0)  # boxed in, just clear of the wheels
+
+    planner = GestaltPlanner(P)
+    d = planner.step(point_cloud(ring, (-4.5, 4.5), (-4.5, 4.5)), np.zeros(3), np.array([5.0, 0.0]))
+    assert d.arc is None and d.arc_index is None
+    assert d.reason.startswith("no safe arc")
+    assert d.votes.vetoed.all() and np.isnan(d.scores).all()
+
+
+def test_decision_carries_everything_a_logger_needs() -> None:
+    planner = GestaltPlanner(P)
+    d = planner.step(point_cloud(flat, (0.0, 5.0), (-3.0, 3.0)), np.zeros(3), np.array([5.0, 0.0]))
+    n_arcs = len(planner.arcs)
+    assert d.votes.vote.shape == d.waypoint_votes.shape == d.scores.shape == (n_arcs,)
+    assert d.window.goodness.shape == (P.window_cells, P.window_cells)
+    assert d.votes.cells.shape == (n_arcs, P.window_cells, P.window_cells)
+    assert d.arc is planner.arcs[d.arc_index]
+    assert d.arc.direction == 1 and d.arc.curvature_per_m == 0.0
+
+
+def test_bad_parameters_raise() -> None:
+    with pytest.raises(ValueError):
+        GestaltParams(benign_tilt_deg=30.0, max_tilt_deg=20.0)
+    with pytest.raises(ValueError):
+        GestaltParams(look_ahead_m=5.0)
+    with pytest.raises(ValueError):
+        GestaltParams(patch_radius_m=0.1)
