@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from rover_sim.scenario import AutonavCmd
 
 HAZCAM = "hazcam_front"
+MAX_BACKTRACKS = 12  # retraced steps allowed per autonav command before giving up
 MAX_RANGE_M = 6.0  # hazcam look-ahead on MER: 3-4 m useful; farther points are too coarse to keep
 
 
@@ -33,6 +34,8 @@ class AutonavStats:
     cycles: int = 0
     cycle_ms: list[float] = field(default_factory=list)  # stereo + map + votes
     outcome: str = ""
+    backtracks: int = 0
+    last_decision: object = None  # nav.gestalt.Decision of the last cycle (for inspection)
 
 
 def primitive_for(arc: GestaltArc, step_m: float) -> Primitive:
@@ -42,6 +45,15 @@ def primitive_for(arc: GestaltArc, step_m: float) -> Primitive:
     if abs(arc.curvature_per_m) < 1e-6:
         return Straight(arc.direction * step_m)
     return Arc(1.0 / arc.curvature_per_m, arc.direction * step_m)
+
+
+def reverse_of(prim: Primitive) -> Primitive:
+    """The primitive that retraces ``prim`` (drive back along the same arc, or turn back)."""
+    if isinstance(prim, TurnInPlace):
+        return TurnInPlace(-prim.angle_rad)
+    if isinstance(prim, Arc):
+        return Arc(prim.radius_m, -prim.distance_m)
+    return Straight(-prim.distance_m)
 
 
 def _heading(R: np.ndarray) -> float:
@@ -56,6 +68,7 @@ def run_autonav(mission: Mission, cmd: AutonavCmd, params: GestaltParams | None 
     rig = mission.renderer.rig(HAZCAM)  # body-fixed, calibrated once
     mission.rec.log_camera(HAZCAM, rig, mission.sim.time_s)
     goal = np.array([cmd.x_m, cmd.y_m])
+    history: list[Primitive] = []
     for _ in range(cmd.max_cycles):
         pose = mission.onboard.pose
         if np.linalg.norm(goal - pose.position_xyz_m[:2]) <= cmd.tolerance_m:
@@ -73,14 +86,24 @@ def run_autonav(mission: Mission, cmd: AutonavCmd, params: GestaltParams | None 
         decision = planner.step(pts_world, np.array([T[0, 3], T[1, 3], yaw]), goal)
         stats.cycle_ms.append((time.perf_counter() - t0) * 1e3)
         stats.cycles += 1
+        stats.last_decision = decision
         _log_cycle(mission, frame, ri, pts_world, decision, planner.arcs, T)
         if decision.arc is None:
-            stats.outcome = "no safe arc"
-            mission._event(f"autonav stopped: {decision.reason}", "WARN")
-            return stats
+            # Boxed in: retrace the last step (ground already driven over is known safe) and look again with
+            # the obstacles now in the map; give up after MAX_BACKTRACKS.
+            if not history or stats.backtracks >= MAX_BACKTRACKS:
+                stats.outcome = "no safe arc"
+                mission._event(f"autonav stopped: {decision.reason}", "WARN")
+                return stats
+            stats.backtracks += 1
+            mission._event(f"autonav cycle {stats.cycles}: no safe arc, backtracking", "WARN")
+            mission._primitive(reverse_of(history.pop()))
+            continue
         mission._event(f"autonav cycle {stats.cycles}: {decision.reason}")
         dist = float(np.linalg.norm(goal - T[:2, 3]))
-        mission._primitive(primitive_for(decision.arc, min(cmd.step_m, max(dist, 0.35))))
+        prim = primitive_for(decision.arc, min(cmd.step_m, max(dist, 0.35)))
+        mission._primitive(prim)
+        history.append(prim)
         if mission.vo is not None:
             mission._vo_update()
     stats.outcome = "cycle budget used up"

@@ -58,7 +58,9 @@ def bench_vo_cmd(json: JsonOpt = None) -> None:
 def bench_suite_cmd(
     json: JsonOpt = None,
     fast: Annotated[bool, typer.Option("--fast", help="Only the CI subset (scenarios with fast = true).")] = False,
-    update_baseline: Annotated[bool, typer.Option("--update-baseline", help="Store these results as baseline.")] = False,
+    update_baseline: Annotated[
+        bool, typer.Option("--update-baseline", help="Store these results as baseline.")
+    ] = False,
 ) -> None:
     """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline."""
     from rover_sim.bench.missions import bench_suite
@@ -102,6 +104,65 @@ def run_cmd(
 def demo_cmd(out: Annotated[Path, typer.Option("--out")] = Path("runs/demo")) -> None:
     """The main job: the Wopmay scenario with a rerun recording, metrics and plots."""
     run_cmd("wopmay", out=out, seed=None, set_=None, record=True, progress=True)
+
+
+@app.command("sweep")
+def sweep_cmd(
+    scenario: Annotated[str, typer.Argument(help="Scenario name (scenarios/<name>.toml) or path to a TOML file.")],
+    grid: Annotated[
+        list[str] | None,
+        typer.Option("--grid", help="dotted.key=v1,v2,... (repeatable); jobs are the cartesian product x seeds."),
+    ] = None,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Run each grid point with seeds 0..N-1.")] = 1,
+    out: Annotated[Path, typer.Option("--out", help="Output directory (re-running skips completed jobs).")] = Path(
+        "runs/sweep"
+    ),
+    workers: Annotated[
+        int | None, typer.Option("--workers", min=0, help="Local worker processes [default: CPUs]; 0: in this process.")
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option("--scheduler", help="Dask scheduler tcp://host:port (needs rover-sim[dask]).")
+    ] = None,
+    set_: SetOpt = None,
+) -> None:
+    """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
+    from rover_sim.sweep import run_sweep
+
+    def report(done: int, total: int, job, result) -> None:
+        if not result.ok:
+            typer.secho(f"[{done}/{total}] FAILED {job.job_id} {job.label}: {result.error}", fg=typer.colors.RED)
+            return
+        m = result.metrics
+        how = "done before" if result.cached else f"{m['wall_s']} s"
+        vo = "-" if m["vo_error_pct"] is None else f"{m['vo_error_pct']} %"
+        typer.echo(
+            f"[{done}/{total}] ok {job.job_id} {job.label}: max slip {m['max_slip_pct']} %, DR error "
+            f"{m['dr_error_pct']} %, VO error {vo} ({how})"
+        )
+
+    try:
+        res = run_sweep(
+            scenario,
+            grid or [],
+            seeds,
+            out,
+            workers=workers,
+            scheduler=scheduler,
+            overrides=set_ or [],
+            on_result=report,
+        )
+    except RoverSimError as e:
+        _fail(e)
+    colour = typer.colors.RED if res.n_failed else typer.colors.GREEN
+    typer.secho(
+        f"{len(res.jobs)} jobs: {res.n_run} run, {res.n_cached} done before, {res.n_failed} failed "
+        f"({res.wall_s:.1f} s)",
+        fg=colour,
+    )
+    typer.echo(f"results: {res.csv_path}; plots: {', '.join(p.name for p in res.plots) or 'none'}")
+    if res.n_failed:
+        typer.echo("re-run the same command to retry the failed jobs (completed ones are skipped)")
+        raise typer.Exit(code=1)
 
 
 def main() -> None:  # pragma: no cover - console entry point

@@ -12,7 +12,7 @@ import numpy as np
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
 from rover_sim.terramechanics import WheelSoilLaw, WheelSoilState
-from rover_sim.world import Sun, build_spec
+from rover_sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
 if TYPE_CHECKING:
     from terrains import Terrain
@@ -117,6 +117,9 @@ class RoverSim:
         self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
         self._inv_cell = 1.0 / terrain.cell_size_m
         self.wheel_ref_rad = np.zeros(6)
+        self._rock_index = {
+            m.geom(f"{ROCK_GEOM_PREFIX}{i:04d}").id: i for i in range(len(terrain.rocks))
+        }  # rock geom id -> index into terrain.rocks
         self._wheel_free = np.ones(6)  # 0 for a locked (held, dragged) wheel
         self._substep_hook: Callable[[RoverSim], None] | None = None
         self._substep_every = 1
@@ -180,7 +183,9 @@ class RoverSim:
         m, d = self.model, self.data
         dt = m.opt.timestep
         ctrl_wheels = self._ctrl[self._wheel_act[0] : self._wheel_act[0] + 6]
-        increment = None if wheel_rate_rad_s is None else np.asarray(wheel_rate_rad_s, dtype=float) * dt * self._wheel_free
+        increment = (
+            None if wheel_rate_rad_s is None else np.asarray(wheel_rate_rad_s, dtype=float) * dt * self._wheel_free
+        )
         for _ in range(n_steps):
             if increment is not None:
                 self.wheel_ref_rad += increment
@@ -299,6 +304,17 @@ class RoverSim:
     def wheels_in_contact(self) -> np.ndarray:
         """(6,) bool: each wheel touches the ground or a rock (from MuJoCo's contact sensors)."""
         return self._sensordata[self._sd_contact].reshape(6, 7)[:, 0] > 0
+
+    def rock_contacts(self, min_height_m: float = 0.0) -> list[tuple[str, str]]:
+        """(rover geom, rock name) pairs in contact now, for rocks at least ``min_height_m`` tall (ground truth)."""
+        m, d = self.model, self.data
+        out = []
+        for g1, g2 in d.contact.geom[: d.ncon]:
+            for a, b in ((g1, g2), (g2, g1)):
+                idx = self._rock_index.get(int(b))
+                if idx is not None and m.geom_bodyid[a] != 0 and self.terrain.rocks[idx].height_m >= min_height_m:
+                    out.append((m.geom(a).name, self.terrain.rocks[idx].name or m.geom(b).name))
+        return out
 
     def body_contacts(self) -> list[str]:
         """Names of non-wheel rover geoms touching the terrain or a rock (a collision, for GESTALT checks)."""

@@ -88,7 +88,11 @@ class RenderConfig:
     shadows: bool = True
     shadow_map_px: int = 2048  # shadow-map side; with the 16 m wide shadow box: 8 mm per texel (1024: 20 % faster)
     shadow_half_extent_m: float = 8.0  # half width of the shadowed square (perpendicular to the sunlight), navcams
-    hazcam_shadow_half_extent_m: float = 4.0  # the same for the hazcams, which look near: 4 mm texels at 2048
+    hazcam_shadow_half_extent_m: float = 6.0  # the same for the hazcams, which look near: 6 mm texels at 2048
+    # Terrain self-shadowing (crater rims, ripple crests at low sun). Off by default: the terrain then only
+    # receives shadows (of the rover and rocks) and is shaded by its slope, which at the scenarios' 25-60 deg
+    # sun loses little, and the shadow pass no longer rasterises the ground: half the cost of a shadowed pair.
+    terrain_casts_shadows: bool = False
     # tessellation of the rover's cylinders/capsules (MuJoCo defaults 28, 16): 24 slices keep a wheel's facets
     # within 1.1 mm of the true cylinder (0.4 % of the depth at the hazcams' 0.26 m)
     builtin_slices: int = 24
@@ -213,13 +217,15 @@ class TerrainTiles:
     Level ``L`` keeps every ``2**L``-th grid row and column of its tile (the tile's last row/column always), so
     it draws the exact hfield surface at ``L = 0`` and a coarser triangulation above; ``error_m[t, L]`` is the
     largest vertical distance between the hfield and level ``L`` over tile ``t`` (``inf`` where the level does
-    not exist). A skirt, hanging ``skirt_m`` below each tile edge, hides the hairline cracks between
-    neighbouring tiles drawn at different levels.
+    not exist). A skirt hanging below each tile edge (as deep as this tile's and its neighbours' largest level
+    errors) hides the hairline cracks between neighbouring tiles drawn at different levels.
     """
 
     geom_names: np.ndarray  # (N, levels) object array of geom names, "" where the level does not exist
     boxes: np.ndarray  # (N, 2, 3) world AABB (min, max) of each tile, skirt included
     error_m: np.ndarray  # (N, levels) non-decreasing in L
+    centres: np.ndarray  # (N, 3) a point of each tile's mean plane (its centre)
+    normals: np.ndarray  # (N, 3) unit upward mean normal of each tile
 
     def geom_ids(self, model: mujoco.MjModel) -> np.ndarray:
         """(N, levels) geom ids in ``model``, -1 where the level does not exist."""
@@ -228,7 +234,7 @@ class TerrainTiles:
     def choose_levels(self, allowed_error_m: np.ndarray) -> np.ndarray:
         """Coarsest level per tile whose height error is at most ``allowed_error_m`` (per tile)."""
         ok = self.error_m <= allowed_error_m[:, None]
-        return ok.sum(axis=1) - 1  # error is non-decreasing in L and error[:, 0] == 0
+        return np.maximum(ok.sum(axis=1) - 1, 0)  # error is non-decreasing in L; level 0 is exact
 
 
 def _level_indices(lo: int, hi: int, step: int) -> np.ndarray:
@@ -272,7 +278,9 @@ def _tile_mesh(
     return verts, np.concatenate(faces), norms, np.stack([u, v], axis=-1)
 
 
-def add_terrain_tiles(spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_tiles: int) -> TerrainTiles:
+def add_terrain_tiles(
+    spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_tiles: int, casts_shadows: bool = True
+) -> TerrainTiles:
     """Add the render-only terrain tiles (all levels, contact-free, massless) to ``spec``; see :class:`TerrainTiles`.
 
     Normals come from the whole grid so shading is continuous across tiles and levels; texture coordinates
@@ -302,6 +310,7 @@ def add_terrain_tiles(spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_
             tile_levels.append((rows, cols))
             errors[t, L] = _decimation_error(h[i0 : i1 + 1, j0 : j1 + 1], rows - i0, cols - j0)
         levels.append(tile_levels)
+    errors[:, 0] = 0.0  # level 0 is the hfield itself (the computed value is rounding noise)
     errors = np.maximum.accumulate(errors, axis=1)
     grid_shape = ((nrow - 2) // n + 1, (ncol - 2) // n + 1)
     worst = np.where(np.isfinite(errors), errors, 0.0).max(axis=1).reshape(grid_shape)
@@ -316,6 +325,7 @@ def add_terrain_tiles(spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_
     mat.textures = list(src.textures)
     mat.rgba, mat.specular, mat.shininess, mat.reflectance = src.rgba, 0.0, 0.0, 0.0
     boxes = np.zeros((len(spans), 2, 3))
+    centres, tile_normals = np.zeros((len(spans), 3)), np.zeros((len(spans), 3))
     geom_names = np.full((len(spans), n_levels), "", dtype=object)
     for t, tile_levels in enumerate(levels):
         for L, (rows, cols) in enumerate(tile_levels):
@@ -331,10 +341,15 @@ def add_terrain_tiles(spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_
             g = spec.worldbody.add_geom()
             g.name, g.type, g.meshname, g.material = name, mujoco.mjtGeom.mjGEOM_MESH, name, TILE_MATERIAL
             g.contype, g.conaffinity, g.group, g.mass = 0, 0, GROUP_HIDDEN, 0.0
+            g.castshadow = casts_shadows
             geom_names[t, L] = name
             if L == 0:
                 boxes[t] = [verts.min(axis=0), verts.max(axis=0)]
-    return TerrainTiles(geom_names, boxes, errors)
+                i0, i1, j0, j1 = spans[t]
+                centres[t] = verts[: (i1 - i0 + 1) * (j1 - j0 + 1)].mean(axis=0)  # grid vertices, not the skirt
+                n_mean = normals[i0 : i1 + 1, j0 : j1 + 1].reshape(-1, 3).mean(axis=0)
+                tile_normals[t] = n_mean / np.linalg.norm(n_mean)
+    return TerrainTiles(geom_names, boxes, errors, centres, tile_normals)
 
 
 def _rock_appearance(spec: mujoco.MjSpec, terrain: Terrain) -> tuple[list[str], np.ndarray]:
@@ -399,7 +414,9 @@ class RenderWorld:
     def __init__(self, sim: RoverSim, config: RenderConfig) -> None:
         self.sim, self.config = sim, config
         spec = sim.spec.copy()
-        self.tiles = add_terrain_tiles(spec, sim.terrain, config.terrain_tile_m, config.max_terrain_tiles)
+        self.tiles = add_terrain_tiles(
+            spec, sim.terrain, config.terrain_tile_m, config.max_terrain_tiles, config.terrain_casts_shadows
+        )
         rock_names, self.rock_boxes = _rock_appearance(spec, sim.terrain)
         spec.geom("terrain").group = GROUP_HIDDEN  # drawn as tiles instead
         light = spec.light("sun")
@@ -441,21 +458,19 @@ class RenderWorld:
         """Pick what to draw for these cameras (culling, tile levels) and aim the shadow box; returns counts."""
         cfg = self.config
         light_dir = self.data.light_xdir[self.sun_id].copy()
-        boxes = np.concatenate([self.tiles.boxes, self.rock_boxes])
-        if cfg.cull:
-            view_boxes = boxes
-            if shadows:  # a geom can shade the view from outside it: sweep its box along the sunlight
-                reach = np.clip((boxes[:, 1, 2] - self.floor_z) / max(-light_dir[2], 0.05), 0.0,
-                                4.0 * shadow_half_m)  # fmt: skip
-                ends = np.stack([np.zeros_like(reach), reach], axis=1)[:, :, None, None] * light_dir
-                swept = boxes[:, None, :, :] + ends  # (N, 2 ends, 2 corners, 3)
-                view_boxes = np.stack([swept.min(axis=(1, 2)), swept.max(axis=(1, 2))], axis=1)
-            shown = np.zeros(len(boxes), dtype=bool)
-            for cam, T in zip(cams, T_world_cams, strict=True):
-                shown |= boxes_in_view(view_boxes, cam, T)
-        else:
-            shown = np.ones(len(boxes), dtype=bool)
         n_tiles = len(self.tiles.boxes)
+        boxes = np.concatenate([self.tiles.boxes, self.rock_boxes])
+        if shadows and cfg.cull:  # a geom can shade the view from outside it: sweep its box along the sunlight
+            casters = slice(0 if cfg.terrain_casts_shadows else n_tiles, None)
+            b = boxes[casters]
+            reach = np.clip((b[:, 1, 2] - self.floor_z) / max(-light_dir[2], 0.05), 0.0, 4.0 * shadow_half_m)
+            swept = b[:, None, :, :] + np.stack([np.zeros_like(reach), reach], axis=1)[:, :, None, None] * light_dir
+            boxes[casters] = np.stack([swept.min(axis=(1, 2)), swept.max(axis=(1, 2))], axis=1)
+        shown = np.ones(len(boxes), dtype=bool)
+        if cfg.cull:
+            shown[:] = False
+            for cam, T in zip(cams, T_world_cams, strict=True):
+                shown |= boxes_in_view(boxes, cam, T)
         tiles_shown, rocks_shown = shown[:n_tiles], shown[n_tiles:]
         if cfg.lod:
             level = self.tiles.choose_levels(self._lod_allowance_m(cams[0], T_world_cams))
@@ -472,15 +487,16 @@ class RenderWorld:
 
     def _lod_allowance_m(self, cam: PinholeCamera, T_world_cams: list[np.ndarray]) -> np.ndarray:
         """Largest tolerable height error per tile: the smaller of an image-space bound (``lod_tolerance_px`` at
-        the tile's distance) and a range bound (``lod_max_depth_error`` of the range, for rays grazing flat ground
-        from the camera's height above the tile, where a height error ``e`` moves the range by ``e / sin(angle)``).
+        the tile's distance) and a range bound: a height error ``e`` moves the range ``r`` of a ray meeting the
+        ground at angle ``a`` by ``e / sin(a)``, and ``r sin(a)`` is the camera's distance to the tile's plane,
+        so ``e <= lod_max_depth_error * distance_to_plane`` keeps the range error below that fraction.
         """
-        cfg, boxes = self.config, self.tiles.boxes
-        allowed = np.full(len(boxes), np.inf)
+        cfg, tiles = self.config, self.tiles
+        allowed = np.full(len(tiles.boxes), np.inf)
         for T in T_world_cams:
-            image = cfg.lod_tolerance_px / cam.fx_px * box_distance(boxes, T[:3, 3])
-            depth = cfg.lod_max_depth_error * np.maximum(T[2, 3] - boxes[:, 1, 2], 0.0)
-            allowed = np.minimum(allowed, np.minimum(image, depth))
+            image = cfg.lod_tolerance_px / cam.fx_px * box_distance(tiles.boxes, T[:3, 3])
+            to_plane = np.abs(np.einsum("ij,ij->i", tiles.centres - T[:3, 3], tiles.normals))
+            allowed = np.minimum(allowed, np.minimum(image, cfg.lod_max_depth_error * to_plane))
         return allowed
 
     def _aim_sun(self, T_world_cam: np.ndarray, light_dir: np.ndarray, half: float) -> None:
@@ -534,7 +550,7 @@ class StereoRenderer:
         self.config = config or RenderConfig()
         self.sim = sim
         self.world = RenderWorld(sim, self.config)
-        self.shadows = self.config.shadows
+        self.shadows = self.config.shadows and sim.sun.shadows  # switch per render: ``renderer.shadows = False``
         self._renderers: dict[int, mujoco.Renderer] = {}
         self._rng = np.random.default_rng(self.config.noise.seed) if self.config.noise else None
         self._right_cam = mujoco.MjvCamera()
@@ -576,14 +592,17 @@ class StereoRenderer:
         return camera_model(self.sim.model, self.sim.data, cam_name, px, px)
 
     # -- rendering core
-    def _scene_for(self, cam_names: list[str], px: int) -> mujoco.Renderer:
-        """Sync state, cull for all ``cam_names``, build the scene for the first camera; returns the renderer."""
+    def _scene_for(self, cam_names: list[str], px: int, lit: bool = True) -> mujoco.Renderer:
+        """Sync state, cull for all ``cam_names``, build the scene for the first camera; returns the renderer.
+
+        ``lit=False`` (depth, segmentation): no shadow casters outside the view are needed.
+        """
         w = self.world
         w.sync()
         cams = [camera_model(w.model, w.data, n, px, px) for n in cam_names]
         poses = [camera_world_pose(w.model, w.data, n) for n in cam_names]
         half = self.config.shadow_half_extent_for(cam_names[0])
-        self.last_drawn = w.prepare(cams, poses, self.shadows, half)
+        self.last_drawn = w.prepare(cams, poses, self.shadows and lit, half)
         r = self._renderer(px)
         r._mjr_context.shadowClip = half  # the directional light's shadow box (read at every mjr_render)
         r.update_scene(w.data, camera=cam_names[0], scene_option=w.option)
@@ -626,7 +645,7 @@ class StereoRenderer:
         MuJoCo's depth buffer holds the distance along the camera's -z axis, which is the OpenCV +z depth.
         """
         px = resolution_px or self.config.resolution_px
-        r = self._scene_for([cam_name], px)
+        r = self._scene_for([cam_name], px, lit=False)
         r.enable_depth_rendering()
         try:
             depth = r.render()
@@ -639,7 +658,7 @@ class StereoRenderer:
     def render_segmentation(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
         """(H, W) int32 geom id **of the physics model** seen at each pixel (terrain tiles -> ``terrain``); -1 sky."""
         px = resolution_px or self.config.resolution_px
-        r = self._scene_for([cam_name], px)
+        r = self._scene_for([cam_name], px, lit=False)
         r.enable_segmentation_rendering()
         try:
             seg = r.render()

@@ -39,6 +39,7 @@ from rover_sim.sensors import SensorSuite
 from rover_sim.world import Sun
 from terrains import synthesize
 
+TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
 FALSE_POSITIVE_M = 0.05  # an accepted VO update whose translation is off by more than this is a false positive
 GOTO_HEADING_TOLERANCE_RAD = math.radians(5.0)
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB
@@ -87,12 +88,23 @@ class Metrics:
     false_positives: int = 0
     vo_steps: int = 0
     vo_accepted: int = 0
-    vo_step_ms_median: float | None = None
     max_vo_slip_pct: float | None = None
-    body_collisions: int = 0
+    body_collisions: int = 0  # ticks with the body (not a wheel) touching terrain or a rock
+    tall_rock_contacts: int = 0  # ticks with any rover geom touching a rock >= TALL_ROCK_M tall
     goal_distance_m: float | None = None
     sim_s: float = 0.0
     extra: dict = field(default_factory=dict)
+    # wall-clock measurements: not deterministic, so written to timing.json rather than metrics.json
+    timing: dict = field(default_factory=dict)
+
+    @property
+    def vo_step_ms_median(self) -> float | None:
+        return self.timing.get("vo_step_ms_median")
+
+    def deterministic_dict(self) -> dict:
+        d = asdict(self)
+        d.pop("timing")
+        return d
 
 
 def _heading(q_wxyz: np.ndarray) -> float:
@@ -159,6 +171,7 @@ class Mission:
         self.keep_out_info: dict | None = None
         self.autonav_stats = None  # set by rover_sim.autonav when the scenario uses autonav
         self.body_collision_ticks = 0
+        self.tall_rock_contact_ticks = 0
         self._last_frame_truth: np.ndarray | None = None
         self._last_frame_dr_distance = 0.0
         self._frame_idx = 0
@@ -274,6 +287,11 @@ class Mission:
         truth = self._record_poses()
         if sim.body_contacts():
             self.body_collision_ticks += 1
+        tall = sim.rock_contacts(TALL_ROCK_M)
+        if tall:
+            self.tall_rock_contact_ticks += 1
+            if self.tall_rock_contact_ticks == 1:
+                self._event(f"contact with a rock taller than {TALL_ROCK_M} m: {tall[0]}", "WARN")
         self.step += 1
         self.rec.log_rover_pose(t, self.step, truth.position_xyz_m, truth.quat_wxyz)
         if self.step % 4 == 0:
@@ -304,8 +322,11 @@ class Mission:
                     "dead_reckoning_distance_m": round(math.hypot(q[0] - z.x_m, q[1] - z.y_m), 3),
                     "true_distance_m": round(math.hypot(t[0] - z.x_m, t[1] - z.y_m), 3),
                 }
-                raise Halt("keep_out", f"onboard pose {d:.2f} m from {z.name} (limit {z.radius_m} m); dead "
-                           f"reckoning thinks {self.keep_out_info['dead_reckoning_distance_m']:.2f} m")
+                raise Halt(
+                    "keep_out",
+                    f"onboard pose {d:.2f} m from {z.name} (limit {z.radius_m} m); dead "
+                    f"reckoning thinks {self.keep_out_info['dead_reckoning_distance_m']:.2f} m",
+                )
         return None
 
     # ------------------------------------------------------------------ VO
@@ -342,8 +363,11 @@ class Mission:
                 ms,
             )
             self.vo_steps.append(rec)
-            self.rec.log_scalars(sim.time_s, self.step, {"slip/true": rec.true_slip, "slip/vo": rec.vo_slip,
-                                                         "vo_inliers": float(res.n_inliers)})
+            self.rec.log_scalars(
+                sim.time_s,
+                self.step,
+                {"slip/true": rec.true_slip, "slip/vo": rec.vo_slip, "vo_inliers": float(res.n_inliers)},
+            )
             if not res.ok:
                 self._event(f"VO {status}: {res.reason}", "WARN")
             elif err > FALSE_POSITIVE_M:
@@ -417,6 +441,7 @@ class Mission:
         return out
 
     def _metrics(self, wall_s: float) -> Metrics:
+        self._wall_s = wall_s
         tr = self.trajectories()
         truth = tr["truth"]
         dist = max(truth.path_length_m(), 1e-9)
@@ -457,12 +482,13 @@ class Mission:
             false_positives=fps,
             vo_steps=len(judged),
             vo_accepted=len(accepted),
-            vo_step_ms_median=round(float(np.median(ms)), 1) if ms else None,
             max_vo_slip_pct=round(100 * float(np.max(vo_slips)), 2) if len(vo_slips) else None,
             body_collisions=self.body_collision_ticks,
+            tall_rock_contacts=self.tall_rock_contact_ticks,
             goal_distance_m=round(float(np.linalg.norm(end[:2] - goal)), 3) if goal is not None else None,
             sim_s=round(self.sim.time_s, 2),
             extra=self._extra(),
+            timing=self._timing(ms),
         )
         m.passed, m.reason = self._judge(m)
         return m
@@ -472,12 +498,18 @@ class Mission:
         if self.keep_out_info:
             out["keep_out"] = self.keep_out_info
         if self.autonav_stats is not None:
-            ms = self.autonav_stats.cycle_ms
             out["autonav"] = {
                 "cycles": self.autonav_stats.cycles,
+                "backtracks": self.autonav_stats.backtracks,
                 "outcome": self.autonav_stats.outcome,
-                "cycle_ms_median": round(float(np.median(ms)), 1) if ms else None,
             }
+        return out
+
+    def _timing(self, vo_ms: list[float]) -> dict:
+        out: dict = {"vo_step_ms_median": round(float(np.median(vo_ms)), 1) if vo_ms else None}
+        if self.autonav_stats is not None and self.autonav_stats.cycle_ms:
+            out["autonav_cycle_ms_median"] = round(float(np.median(self.autonav_stats.cycle_ms)), 1)
+        out["realtime_factor"] = round(self.sim.time_s / max(self._wall_s, 1e-9), 1)
         return out
 
     def _last_goal(self) -> np.ndarray | None:
@@ -497,36 +529,51 @@ class Mission:
                 fails.append(text)
 
         if p.max_vo_error_pct is not None:
-            need(m.vo_error_pct is not None and m.vo_error_pct <= p.max_vo_error_pct,
-                 f"VO error {m.vo_error_pct} % > {p.max_vo_error_pct} %")
+            need(
+                m.vo_error_pct is not None and m.vo_error_pct <= p.max_vo_error_pct,
+                f"VO error {m.vo_error_pct} % > {p.max_vo_error_pct} %",
+            )
         if p.min_dr_error_pct is not None:
             need(m.dr_error_pct >= p.min_dr_error_pct, f"DR error {m.dr_error_pct} % < {p.min_dr_error_pct} %")
         if p.max_dr_error_pct is not None:
             need(m.dr_error_pct <= p.max_dr_error_pct, f"DR error {m.dr_error_pct} % > {p.max_dr_error_pct} %")
         if p.min_vo_convergence_pct is not None:
-            need(m.vo_convergence_pct is not None and m.vo_convergence_pct >= p.min_vo_convergence_pct,
-                 f"VO convergence {m.vo_convergence_pct} % < {p.min_vo_convergence_pct} %")
+            need(
+                m.vo_convergence_pct is not None and m.vo_convergence_pct >= p.min_vo_convergence_pct,
+                f"VO convergence {m.vo_convergence_pct} % < {p.min_vo_convergence_pct} %",
+            )
         if p.min_max_slip_pct is not None:
             need(m.max_slip_pct >= p.min_max_slip_pct, f"max slip {m.max_slip_pct} % < {p.min_max_slip_pct} %")
         if p.max_max_slip_pct is not None:
             need(m.max_slip_pct <= p.max_max_slip_pct, f"max slip {m.max_slip_pct} % > {p.max_max_slip_pct} %")
         if p.max_false_positives is not None:
-            need(m.false_positives <= p.max_false_positives,
-                 f"{m.false_positives} VO false positives > {p.max_false_positives}")
+            need(
+                m.false_positives <= p.max_false_positives,
+                f"{m.false_positives} VO false positives > {p.max_false_positives}",
+            )
         if p.expect_halt is not None:
             need(m.halted == p.expect_halt, f"expected a {p.expect_halt} halt, got {m.halted}")
         elif m.halted is not None:
             fails.append(f"unexpected {m.halted} halt")
         if p.expect_dead_reckoning_clear:
             info = self.keep_out_info
-            need(info is not None and info["dead_reckoning_distance_m"] > info["onboard_distance_m"] + 0.1
-                 and any(info["dead_reckoning_distance_m"] >= z.radius_m for z in self.sc.keep_out),
-                 "dead reckoning did not believe the rover clear at the keep-out halt")
+            need(
+                info is not None
+                and info["dead_reckoning_distance_m"] > info["onboard_distance_m"] + 0.1
+                and any(info["dead_reckoning_distance_m"] >= z.radius_m for z in self.sc.keep_out),
+                "dead reckoning did not believe the rover clear at the keep-out halt",
+            )
         if p.goal_within_m is not None:
-            need(m.goal_distance_m is not None and m.goal_distance_m <= p.goal_within_m,
-                 f"ended {m.goal_distance_m} m from the goal (> {p.goal_within_m} m)")
+            need(
+                m.goal_distance_m is not None and m.goal_distance_m <= p.goal_within_m,
+                f"ended {m.goal_distance_m} m from the goal (> {p.goal_within_m} m)",
+            )
         if p.max_body_collisions is not None:
             need(m.body_collisions <= p.max_body_collisions, f"{m.body_collisions} body-collision ticks")
+            need(
+                m.tall_rock_contacts <= p.max_body_collisions,
+                f"{m.tall_rock_contacts} ticks touching rocks taller than {TALL_ROCK_M} m",
+            )
         return (not fails, "; ".join(fails) if fails else "all criteria met")
 
 
@@ -535,7 +582,8 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     from rover_sim import plots
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "metrics.json").write_text(json.dumps(asdict(metrics), indent=2))
+    (out_dir / "metrics.json").write_text(json.dumps(metrics.deterministic_dict(), indent=2))
+    (out_dir / "timing.json").write_text(json.dumps(metrics.timing | {"wall_s": metrics.wall_s}, indent=2))
     (out_dir / "scenario.json").write_text(json.dumps(mission.sc.resolved_dict(), indent=2))
     (out_dir / "events.log").write_text("\n".join(mission.events) + "\n")
     tdir = out_dir / "trajectories"
@@ -547,16 +595,29 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     pdir.mkdir(exist_ok=True)
     truth = trajs["truth"]
     dist = truth.cumulative_distance_m()
-    errors = {n: np.linalg.norm(t.positions_xyz - truth.positions_xyz, axis=1) for n, t in trajs.items() if n != "truth"}
+    errors = {
+        n: np.linalg.norm(t.positions_xyz - truth.positions_xyz, axis=1) for n, t in trajs.items() if n != "truth"
+    }
     if len(truth) > 1:
         plots.plot_error_vs_distance(dist, errors, pdir / "error_vs_distance.png", title=mission.sc.name)
     keep = [(z.name, z.x_m, z.y_m, z.radius_m) for z in mission.sc.keep_out]
-    plots.plot_paths(mission.terrain, {n: t.positions_xyz for n, t in trajs.items()}, pdir / "paths.png", keep_out=keep,
-                     title=mission.sc.name)
+    plots.plot_paths(
+        mission.terrain,
+        {n: t.positions_xyz for n, t in trajs.items()},
+        pdir / "paths.png",
+        keep_out=keep,
+        title=mission.sc.name,
+    )
     if mission.vo_steps:
         ts = np.array([s.t_s for s in mission.vo_steps])
-        plots.plot_slip(ts, {"truth": np.array([s.true_slip for s in mission.vo_steps]),
-                             "VO": np.array([s.vo_slip for s in mission.vo_steps])}, pdir / "slip.png")
+        plots.plot_slip(
+            ts,
+            {
+                "truth": np.array([s.true_slip for s in mission.vo_steps]),
+                "VO": np.array([s.vo_slip for s in mission.vo_steps]),
+            },
+            pdir / "slip.png",
+        )
 
 
 def run_scenario(

@@ -142,7 +142,9 @@ class PassSpec(_Spec):
         False, description="At a keep-out halt, dead reckoning alone still believes the rover outside the zone."
     )
     goal_within_m: float | None = Field(None, gt=0.0, le=100.0, description="Truth within this of the last goal.")
-    max_body_collisions: int | None = Field(None, ge=0, le=1000)
+    max_body_collisions: int | None = Field(
+        None, ge=0, le=1000, description="Ticks with the body touching anything, or any part touching a rock >= 25 cm."
+    )
 
 
 class PhysicsSpec(_Spec):

@@ -48,7 +48,7 @@ class ImuParams:
     rate_hz: float = 100.0
     gyro_arw_deg_sqrt_h: float = 0.07
     gyro_bias_instability_deg_h: float = 1.0
-    gyro_bias_corr_time_s: float = 600.0
+    gyro_bias_corr_time_s: float = 600.0  # our choice: wanders over minutes (Allan bump near 1.9 x 600 s)
     accel_noise_ug_sqrt_hz: float = 50.0
     accel_bias_ug: float = 0.0  # std of a constant turn-on bias per axis (0: none)
 

@@ -81,8 +81,11 @@ def build_spec(
     for i, rock in enumerate(terrain.rocks):
         mesh = rock.mesh()
         name = f"{ROCK_GEOM_PREFIX}{i:04d}"
-        spec.add_mesh(name=name, uservert=np.asarray(mesh.vertices, dtype=float).ravel().tolist(),
-                      userface=np.asarray(mesh.faces, dtype=int).ravel().tolist())
+        spec.add_mesh(
+            name=name,
+            uservert=np.asarray(mesh.vertices, dtype=float).ravel().tolist(),
+            userface=np.asarray(mesh.faces, dtype=int).ravel().tolist(),
+        )
         g = spec.worldbody.add_geom()
         g.name = name
         g.type = mujoco.mjtGeom.mjGEOM_MESH

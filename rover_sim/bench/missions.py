@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict
 from pathlib import Path
 
 from rover_sim.runner import Metrics, run_scenario
@@ -55,13 +54,17 @@ def bench_vo(json_path: str | None = None, out_root: Path = Path("runs/bench_vo"
         "featureless": "0 false positives",
         "shadow": "0 false positives",
     }
-    print("| case | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | false pos. "
-          "| VO ms/step | acceptance | pass |")
+    print(
+        "| case | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | false pos. "
+        "| VO ms/step | acceptance | pass |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---|:-:|")
     for case, r in results.items():
-        print(f"| {case} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | "
-              f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {r['false_positives']} | "
-              f"{_fmt(r['vo_step_ms_median'])} | {accept[case]} | {'yes' if r['passed'] else 'NO'} |")
+        print(
+            f"| {case} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | "
+            f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {r['false_positives']} | "
+            f"{_fmt(r['vo_step_ms_median'])} | {accept[case]} | {'yes' if r['passed'] else 'NO'} |"
+        )
     if json_path:
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
         Path(json_path).write_text(json.dumps(results, indent=2))
@@ -77,8 +80,10 @@ def _regressions(m: Metrics, base: dict | None) -> list[str]:
             out.append(f"VO error {m.vo_error_pct} % > baseline {base['vo_error_pct']} % + {VO_ERROR_SLACK_PCT}")
     if m.vo_convergence_pct is not None and base.get("vo_convergence_pct") is not None:
         if m.vo_convergence_pct < base["vo_convergence_pct"] - CONVERGENCE_SLACK_PCT:
-            out.append(f"VO convergence {m.vo_convergence_pct} % < baseline {base['vo_convergence_pct']} % "
-                       f"- {CONVERGENCE_SLACK_PCT}")
+            out.append(
+                f"VO convergence {m.vo_convergence_pct} % < baseline {base['vo_convergence_pct']} % "
+                f"- {CONVERGENCE_SLACK_PCT}"
+            )
     if m.false_positives > base.get("false_positives", 0):
         out.append(f"{m.false_positives} VO false positives (baseline {base.get('false_positives', 0)})")
     return out
@@ -97,7 +102,7 @@ def bench_suite(
     for name in names:
         m = run_scenario(name, out_root / name, record=False)
         regress = _regressions(m, baseline.get(name))
-        row = asdict(m) | {"regressions": regress}
+        row = m.deterministic_dict() | {"timing": m.timing, "regressions": regress}
         rows.append(row)
         ok &= m.passed and not regress
     print("| scenario | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | pass | note |")
@@ -105,8 +110,10 @@ def bench_suite(
     for r in rows:
         good = r["passed"] and not r["regressions"]
         note = "; ".join(r["regressions"]) or r["reason"]
-        print(f"| {r['scenario']} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | "
-              f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {'yes' if good else 'NO'} | {note} |")
+        print(
+            f"| {r['scenario']} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | "
+            f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {'yes' if good else 'NO'} | {note} |"
+        )
     if json_path:
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
         Path(json_path).write_text(json.dumps(rows, indent=2))

@@ -47,7 +47,9 @@ def slope_terrain(material: str, slope_deg: float, seed: int = 0, size_m: tuple[
     return synthesize(recipe, seed)
 
 
-def measure_slip(material: str, slope_deg: float, drive_m: float = 3.0, warmup_m: float = 0.5, seed: int = 0) -> SlipRow:
+def measure_slip(
+    material: str, slope_deg: float, drive_m: float = 3.0, warmup_m: float = 0.5, seed: int = 0
+) -> SlipRow:
     sim = RoverSim(slope_terrain(material, slope_deg, seed))
     sim.place(START_X_M, 0.0, 0.0)
     r = sim.law.radius_m
@@ -123,8 +125,10 @@ def run(json_path: str | None = None, slopes_deg: tuple[float, ...] = SLOPES_DEG
     print("| material | slope (deg) | slip (%) | published anchor / acceptance | ok |")
     print("|---|---:|---:|---|:-:|")
     for r in rows:
-        print(f"| {r.material} | {r.slope_deg:.0f} | {100 * r.slip:.1f} | {anchor(r.material, r.slope_deg)} "
-              f"| {'yes' if passes(r) else 'NO'} |")
+        print(
+            f"| {r.material} | {r.slope_deg:.0f} | {100 * r.slip:.1f} | {anchor(r.material, r.slope_deg)} "
+            f"| {'yes' if passes(r) else 'NO'} |"
+        )
     print()
     print("| check | measured | acceptance |")
     print("|---|---:|---|")

@@ -101,8 +101,16 @@ def test_differential_holds_on_twisted_terrain():
 
 
 def test_climbs_a_20cm_rock_keeping_six_wheels_down():
-    rock = ExplicitRockSpec(name="step20", x_m=0.0, y_m=0.55, shape="semi_ellipsoid", length_m=0.7, width_m=0.7, buried_m=0.15,
-                            height_m=0.20)  # partly buried: a sloping face, as most rocks
+    rock = ExplicitRockSpec(
+        name="step20",
+        x_m=0.0,
+        y_m=0.55,
+        shape="semi_ellipsoid",
+        length_m=0.7,
+        width_m=0.7,
+        buried_m=0.15,
+        height_m=0.20,
+    )  # partly buried: a sloping face, as most rocks
     sim = RoverSim(_flat(material="bedrock", explicit=[rock]))
     sim.place(-1.6, 0.0, 0.0)
     contact_ticks, wheel_z = [], []
@@ -116,7 +124,9 @@ def test_climbs_a_20cm_rock_keeping_six_wheels_down():
     lift = np.max(wheel_z, axis=0) - wheel_z[0]
     assert (lift[:3] > 0.15).all(), f"every left wheel climbed the 20 cm rock: lift {lift[:3]}"
     assert (lift[3:] < 0.05).all()
-    assert np.mean(contact_ticks) == 1.0, f"wheel left the ground in {100 * (1 - np.mean(contact_ticks)):.1f} % of ticks"
+    assert np.mean(contact_ticks) == 1.0, (
+        f"wheel left the ground in {100 * (1 - np.mean(contact_ticks)):.1f} % of ticks"
+    )
     assert not sim.body_contacts()
 
 

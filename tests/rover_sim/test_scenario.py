@@ -58,14 +58,30 @@ def test_broken_toml_syntax(tmp_path):
 
 
 _toml_value = st.recursive(
-    st.none() | st.booleans() | st.integers(-10**6, 10**6) | st.floats(allow_nan=True) | st.text(max_size=8),
+    st.none() | st.booleans() | st.integers(-(10**6), 10**6) | st.floats(allow_nan=True) | st.text(max_size=8),
     lambda children: st.lists(children, max_size=3) | st.dictionaries(st.text(max_size=8), children, max_size=3),
     max_leaves=8,
 )
 _keys = st.sampled_from(
-    ["name", "seed", "terrain", "terrain.slope.slope_deg", "terrain.cell_size_m", "sun.elevation_deg", "nav.vo_step_m",
-     "nav.camera", "commands", "commands.0.distance_m", "commands.0.type", "keep_out", "pass.max_vo_error_pct",
-     "start.x_m", "physics.timestep_s", "nav", "bogus"]
+    [
+        "name",
+        "seed",
+        "terrain",
+        "terrain.slope.slope_deg",
+        "terrain.cell_size_m",
+        "sun.elevation_deg",
+        "nav.vo_step_m",
+        "nav.camera",
+        "commands",
+        "commands.0.distance_m",
+        "commands.0.type",
+        "keep_out",
+        "pass.max_vo_error_pct",
+        "start.x_m",
+        "physics.timestep_s",
+        "nav",
+        "bogus",
+    ]
 )
 
 

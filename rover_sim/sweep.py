@@ -1,0 +1,625 @@
+"""Monte-Carlo sweeps: one scenario over a grid of ``--set`` values times seeds, run in parallel, gathered into a table.
+
+The steps of :func:`run_sweep`:
+
+1. plan: the cartesian product of the grid axes times the seeds; each point is loaded and validated here (a bad
+   value fails before anything runs) and becomes a :class:`Job` holding its fully resolved scenario;
+2. skip: a job whose ``DIR/jobs/<job_id>/metrics.json`` is already complete is not run again (``job_id`` is a hash
+   of the resolved scenario, so an edited scenario file or a changed default gives new jobs);
+3. run: the rest go to an executor: this process (``workers=0``), a local ``spawn`` process pool (the default;
+   never ``fork``: this process may already hold an EGL context, which a fork would copy), or a Dask cluster
+   (``scheduler="tcp://host:port"``, the ``rover-sim[dask]`` extra, tasks submitted with ``retries=2``). Each job is
+   ``run_scenario(..., record=False)`` into its own ``DIR/jobs/<job_id>/``; an exception in one job is caught in
+   its worker and reported as that job's failure, and a crashed local worker fails the jobs it took down (re-run the
+   sweep to retry them: completed jobs are skipped). Workers get the resolved scenario, not the file; on a remote
+   cluster they write each job's outputs at the same path on their own disks, while ``metrics.json`` (from the
+   returned result), ``results.csv`` and the plots are written here;
+4. gather: ``DIR/results.csv`` (one row per job, in grid order) and ``DIR/plots/*.png``.
+
+This module imports only the standard library at the top: a spawned worker imports it to start, and must be able to
+set its thread limits before numpy loads.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import os
+import time
+import traceback
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from rover_sim.errors import ConfigError, RoverSimError
+
+#: metrics.json keys copied into results.csv (the issue's metric set), in column order
+METRIC_COLUMNS = (
+    "scenario",
+    "seed",
+    "distance_m",
+    "dr_error_pct",
+    "vo_error_pct",
+    "vo_convergence_pct",
+    "max_slip_pct",
+    "mean_slip_pct",
+    "passed",
+    "reason",
+    "wall_s",
+)
+JOB_ID_CHARS = 16  # hex digits of sha256 kept: collisions are negligible for any sweep that fits on a disk
+DASK_RETRIES = 2  # Dask re-runs a task this often when its worker dies or it raises
+DASK_CONNECT_TIMEOUT_S = 30.0
+# Same thread limits as Dask's nanny (distributed.nanny.pre-spawn-environ), so both backends compute alike and
+# K workers on K cores do not oversubscribe them.
+WORKER_THREAD_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+
+
+class DaskUnavailable(RoverSimError):
+    """``--scheduler`` was given but dask.distributed is not installed."""
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(
+            f"--scheduler needs dask.distributed ({detail}). Install the extra: pip install 'rover-sim[dask]'"
+        )
+
+
+class SchedulerUnreachable(RoverSimError):
+    """No Dask scheduler answered at the given address."""
+
+    def __init__(self, address: str, detail: str) -> None:
+        super().__init__(
+            f"no Dask scheduler at {address} ({detail}). Start one with `dask scheduler` and workers with "
+            f"`dask worker {address}` on machines that have rover-sim installed"
+        )
+
+
+# ------------------------------------------------------------------------------------------------- data types
+
+
+@dataclass(frozen=True)
+class GridAxis:
+    """One ``--grid dotted.key=v1,v2,...``: the raw TOML text of each value (as ``--set`` takes it) and its value."""
+
+    key: str
+    raw: tuple[str, ...]
+    values: tuple[Any, ...]
+
+
+@dataclass(frozen=True)
+class Job:
+    """One run of the sweep: a grid point and a seed, with the scenario resolved and validated."""
+
+    job_id: str
+    params: dict[str, Any]  # grid key -> value, in grid order
+    seed: int
+    scenario: dict[str, Any]  # Scenario.resolved_dict(); what the worker runs, and what job_id hashes
+
+    @property
+    def label(self) -> str:
+        return " ".join([f"{k.rsplit('.', 1)[-1]}={v}" for k, v in self.params.items()] + [f"seed={self.seed}"])
+
+
+@dataclass
+class JobResult:
+    job_id: str
+    status: str  # "ok": the mission ran (whether or not it met its pass criterion); "failed": it raised or crashed
+    metrics: dict[str, Any] | None = None  # metrics.json
+    error: str | None = None  # one line, for results.csv
+    traceback: str | None = None
+    cached: bool = False  # read from an earlier run's metrics.json
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+@dataclass
+class SweepResult:
+    out_dir: Path
+    axes: list[GridAxis]
+    jobs: list[Job]
+    results: list[JobResult]  # same order as jobs
+    wall_s: float
+    csv_path: Path
+    plots: list[Path] = field(default_factory=list)
+
+    @property
+    def n_cached(self) -> int:
+        return sum(r.cached for r in self.results)
+
+    @property
+    def n_failed(self) -> int:
+        return sum(not r.ok for r in self.results)
+
+    @property
+    def n_run(self) -> int:
+        return len(self.results) - self.n_cached
+
+
+JobFn = Callable[[Job, str], JobResult]
+OnResult = Callable[[int, int, Job, JobResult], None]
+
+
+def _no_progress(done: int, total: int, job: Job, result: JobResult) -> None:
+    """The do-nothing progress callback."""
+
+
+# ------------------------------------------------------------------------------------------------- planning
+
+
+def _split_top_level(text: str) -> list[str]:
+    """Split on commas outside brackets and quotes: ``10,[1,2],"a,b"`` -> ``['10', '[1,2]', '"a,b"']``."""
+    items, depth, quote, start = [], 0, "", 0
+    for i, ch in enumerate(text):
+        if quote:
+            quote = "" if ch == quote else quote
+        elif ch in "\"'":
+            quote = ch
+        elif ch in "[{":
+            depth += 1
+        elif ch in "]}":
+            depth -= 1
+        elif ch == "," and depth == 0:
+            items.append(text[start:i])
+            start = i + 1
+    items.append(text[start:])
+    return [s.strip() for s in items]
+
+
+def parse_grid(text: str) -> GridAxis:
+    """``terrain.slope.slope_deg=10,15,20`` -> a :class:`GridAxis`; values are TOML like ``--set`` values."""
+    from rover_sim.scenario import parse_override
+
+    if "=" not in text:
+        raise ConfigError("--grid", text, "expected dotted.key=v1,v2,... (e.g. terrain.slope.slope_deg=10,15,20)")
+    key, raw_values = (s.strip() for s in text.split("=", 1))
+    if key == "seed":
+        raise ConfigError("--grid", key, "use --seeds N to sweep seeds 0..N-1")
+    raw = _split_top_level(raw_values)
+    if not key or any(not r for r in raw):
+        raise ConfigError("--grid", text, "empty key or value; expected dotted.key=v1,v2,...")
+    if len(set(raw)) != len(raw):
+        raise ConfigError("--grid", key, f"repeated value in {raw_values!r}")
+    return GridAxis(key, tuple(raw), tuple(parse_override(f"{key}={r}")[1] for r in raw))
+
+
+def job_id_of(resolved: dict[str, Any]) -> str:
+    """Stable id of a job: sha256 of its resolved scenario as canonical JSON."""
+    blob = json.dumps(resolved, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(blob.encode()).hexdigest()[:JOB_ID_CHARS]
+
+
+def plan_jobs(
+    scenario: str | Path,
+    axes: Sequence[GridAxis],
+    seeds: int | Iterable[int],
+    overrides: Sequence[str] = (),
+) -> list[Job]:
+    """The cartesian product of the axes (first axis varies slowest) times the seeds, each loaded and validated.
+
+    ``overrides`` (``--set`` texts) apply to every job before the grid values. Points that resolve to the same
+    scenario (``10`` and ``10.0``) are one job.
+    """
+    from rover_sim.scenario import load_scenario
+
+    keys = [a.key for a in axes]
+    if len(set(keys)) != len(keys):
+        raise ConfigError("--grid", ", ".join(keys), "a key appears in two --grid options; give it once")
+    seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
+    if not seed_list:
+        raise ConfigError("--seeds", str(seeds), "need at least one seed")
+    jobs: dict[str, Job] = {}
+    points = itertools.product(*[list(zip(a.raw, a.values, strict=True)) for a in axes])
+    for point, seed in itertools.product(list(points), seed_list):
+        sets = list(overrides) + [f"{k}={raw}" for k, (raw, _) in zip(keys, point, strict=True)]
+        resolved = load_scenario(scenario, sets, seed).resolved_dict()
+        job = Job(job_id_of(resolved), {k: v for k, (_, v) in zip(keys, point, strict=True)}, seed, resolved)
+        jobs.setdefault(job.job_id, job)
+    return list(jobs.values())
+
+
+# ------------------------------------------------------------------------------------------------- one job
+
+
+def _write_json(path: Path, obj: Any) -> None:
+    """Write atomically (a crash never leaves half a file that looks complete)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:6]}.tmp")
+    tmp.write_text(json.dumps(obj, indent=2, default=str))
+    os.replace(tmp, path)
+
+
+def load_completed(job_dir: Path) -> dict[str, Any] | None:
+    """The metrics of a completed job, or None if it has not completed (missing, partial or foreign file)."""
+    try:
+        metrics = json.loads((job_dir / "metrics.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(metrics, dict) or any(k not in metrics for k in METRIC_COLUMNS):
+        return None
+    return metrics
+
+
+def run_job(job: Job, jobs_dir: str) -> JobResult:
+    """Run one job in this process: ``run_scenario(..., record=False)`` into ``jobs_dir/<job_id>/``.
+
+    This is the function workers execute. A job's exception is its result (``status="failed"``), not the sweep's.
+    """
+    job_dir = Path(jobs_dir) / job.job_id
+    try:
+        from rover_sim.scenario import Scenario
+
+        scenario = Scenario.model_validate(job.scenario)
+        from rover_sim.runner import run_scenario
+
+        metrics = run_scenario(scenario, job_dir, record=False)
+        return JobResult(job.job_id, "ok", metrics=asdict(metrics))
+    except Exception as e:  # noqa: BLE001 - isolation boundary: any failure of one job is reported, the sweep goes on
+        (job_dir / "metrics.json").unlink(missing_ok=True)  # outputs written before the failure are not a result
+        return _failed(job, e)
+
+
+def _failed(job: Job, error: BaseException, why: str = "") -> JobResult:
+    """A failed result: the error on one line (for results.csv) and the full traceback (for error.json)."""
+    text = "; ".join(line.strip() for line in f"{why}{type(error).__name__}: {error}".splitlines() if line.strip())
+    return JobResult(job.job_id, "failed", error=text, traceback="".join(traceback.format_exception(error)))
+
+
+def _record(jobs_dir: Path, job: Job, result: JobResult) -> None:
+    """Client side: metrics.json for a finished job (workers may not share our disk), error.json for a failed one."""
+    job_dir = jobs_dir / job.job_id
+    if result.ok:
+        _write_json(job_dir / "metrics.json", result.metrics)
+        (job_dir / "error.json").unlink(missing_ok=True)
+    else:
+        (job_dir / "metrics.json").unlink(missing_ok=True)
+        _write_json(job_dir / "error.json", {"job_id": job.job_id, "params": job.params, "seed": job.seed,
+                                              "error": result.error, "traceback": result.traceback})
+
+
+# ------------------------------------------------------------------------------------------------- executors
+# Each yields (job, result) as jobs finish.
+
+
+def _run_in_process(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn) -> Iterator[tuple[Job, JobResult]]:
+    """One job after another in this process. The mission loop turns Ctrl-C into a partial result; here Ctrl-C
+    must stop the sweep instead and leave that job to be run again, so a SIGINT handler notes it first."""
+    import signal
+    import threading
+
+    interrupted: list[bool] = []
+
+    def on_sigint(signum, frame) -> None:
+        interrupted.append(True)
+        raise KeyboardInterrupt
+
+    in_main = threading.current_thread() is threading.main_thread()
+    for job in jobs:
+        previous = signal.signal(signal.SIGINT, on_sigint) if in_main else None
+        try:
+            result = job_fn(job, jobs_dir)
+        finally:
+            if in_main:
+                signal.signal(signal.SIGINT, previous)
+        if interrupted:
+            (Path(jobs_dir) / job.job_id / "metrics.json").unlink(missing_ok=True)
+            raise KeyboardInterrupt
+        yield job, result
+
+
+def init_worker() -> None:
+    """Pool-worker start-up: thread limits before numpy loads (see :data:`WORKER_THREAD_ENV`); Ctrl-C ignored
+    (the parent stops the sweep and terminates its workers, so no job records a half-run mission as done)."""
+    import signal
+
+    for k, v in WORKER_THREAD_ENV.items():
+        os.environ.setdefault(k, v)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _run_on_pool(
+    jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, workers: int
+) -> Iterator[tuple[Job, JobResult]]:
+    """A local ``spawn`` process pool: each worker imports rover_sim afresh, none inherits a GL context."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=ctx, initializer=init_worker)
+    finished = False
+    try:
+        futures = {pool.submit(job_fn, job, jobs_dir): job for job in jobs}
+        for fut in as_completed(futures):
+            job = futures[fut]
+            try:
+                yield job, fut.result()
+            except BrokenProcessPool as e:
+                yield job, _failed(job, e, "a worker process crashed, taking this job with it (re-run the sweep "
+                                           "to retry; completed jobs are skipped): ")
+            except Exception as e:  # noqa: BLE001 - e.g. a result that cannot be pickled: this job fails, not all
+                yield job, _failed(job, e)
+        finished = True
+    finally:
+        if finished:
+            pool.shutdown(wait=True)
+        else:  # Ctrl-C or an error in the caller: stop now rather than wait for the running jobs
+            processes = list((getattr(pool, "_processes", None) or {}).values())  # no public API before 3.14
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in processes:
+                proc.terminate()
+
+
+def _run_on_dask(
+    jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, scheduler: str
+) -> Iterator[tuple[Job, JobResult]]:
+    """Submit every job to a Dask cluster (``retries=2``: a task whose worker dies runs again elsewhere)."""
+    try:
+        from distributed import Client, as_completed
+    except ImportError as e:
+        raise DaskUnavailable(str(e)) from None
+    try:
+        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError) as e:
+        raise SchedulerUnreachable(scheduler, f"{type(e).__name__}: {e}") from None
+    try:
+        token = uuid.uuid4().hex[:8]  # fresh keys: never pick up another sweep's cached task on a shared cluster
+        futures = {
+            client.submit(job_fn, job, jobs_dir, key=f"rover-sim-{job.job_id}-{token}", retries=DASK_RETRIES,
+                          pure=False): job
+            for job in jobs
+        }
+        for fut in as_completed(futures):
+            job = futures[fut]
+            if fut.status == "finished":
+                yield job, fut.result()
+            else:
+                try:
+                    err = fut.exception()
+                except Exception as e:  # noqa: BLE001 - a cancelled future raises instead of returning its error
+                    err = e
+                yield job, _failed(job, err, f"Dask task {fut.status} (retries: {DASK_RETRIES}): ")
+    finally:
+        client.close()
+
+
+# ------------------------------------------------------------------------------------------------- the sweep
+
+
+def default_workers() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def run_sweep(
+    scenario: str | Path,
+    grid: Sequence[str | GridAxis],
+    seeds: int | Iterable[int],
+    out_dir: str | Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    overrides: Sequence[str] = (),
+    on_result: OnResult = _no_progress,
+    job_fn: JobFn = run_job,
+    plots: bool = True,
+) -> SweepResult:
+    """Run ``scenario`` over the cartesian product of ``grid`` times ``seeds`` into ``out_dir``; see the module doc.
+
+    ``workers``: local processes (default: the CPUs this process may use; 0 runs every job in this process).
+    ``scheduler``: a Dask scheduler address; the jobs run there instead of locally.
+    ``job_fn``: what runs one job; a module-level function (workers import it by name), :func:`run_job` by default.
+    """
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    jobs_dir = out / "jobs"
+    axes = [g if isinstance(g, GridAxis) else parse_grid(g) for g in grid]
+    jobs = plan_jobs(scenario, axes, seeds, overrides)
+    jobs_dir.mkdir(parents=True, exist_ok=True)
+    _write_json(out / "sweep.json", {
+        "scenario": str(scenario), "grid": {a.key: list(a.raw) for a in axes}, "overrides": list(overrides),
+        "seeds": sorted({j.seed for j in jobs}), "jobs": {j.job_id: {"params": j.params, "seed": j.seed} for j in jobs},
+    })
+    results: dict[str, JobResult] = {}
+    for job in jobs:
+        _write_json(jobs_dir / job.job_id / "job.json", {"job_id": job.job_id, "params": job.params,
+                                                         "seed": job.seed, "scenario": job.scenario})
+        done = load_completed(jobs_dir / job.job_id)
+        if done is not None:
+            results[job.job_id] = JobResult(job.job_id, "ok", metrics=done, cached=True)
+            on_result(len(results), len(jobs), job, results[job.job_id])
+    pending = [j for j in jobs if j.job_id not in results]
+
+    n_workers = default_workers() if workers is None else workers
+    if not pending:
+        stream: Iterator[tuple[Job, JobResult]] = iter(())
+    elif scheduler is not None:
+        stream = _run_on_dask(pending, str(jobs_dir), job_fn, scheduler)
+    elif n_workers <= 0:
+        stream = _run_in_process(pending, str(jobs_dir), job_fn)
+    else:
+        stream = _run_on_pool(pending, str(jobs_dir), job_fn, n_workers)
+    for job, result in stream:
+        _record(jobs_dir, job, result)
+        results[job.job_id] = result
+        on_result(len(results), len(jobs), job, result)
+
+    ordered = [results[j.job_id] for j in jobs]
+    csv_path = write_results_csv(out / "results.csv", axes, jobs, ordered)
+    plot_paths = plot_sweep(out / "plots", axes, jobs, ordered) if plots else []
+    return SweepResult(out, axes, jobs, ordered, time.perf_counter() - t0, csv_path, plot_paths)
+
+
+# ------------------------------------------------------------------------------------------------- results.csv
+
+
+def result_columns(axes: Sequence[GridAxis]) -> list[str]:
+    return ["job_id", *[a.key for a in axes], *METRIC_COLUMNS, "status", "error"]
+
+
+def _cell(v: Any) -> Any:
+    if v is None:
+        return ""
+    return json.dumps(v) if isinstance(v, list | dict) else v
+
+
+def write_results_csv(path: Path, axes: Sequence[GridAxis], jobs: Sequence[Job], results: Sequence[JobResult]) -> Path:
+    """One row per job, in grid order: job_id, the grid values, the metrics, status and error."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    with tmp.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(result_columns(axes))
+        for job, res in zip(jobs, results, strict=True):
+            m = res.metrics or {"scenario": job.scenario.get("name"), "seed": job.seed}
+            w.writerow([job.job_id, *[_cell(job.params[a.key]) for a in axes],
+                        *[_cell(m.get(k)) for k in METRIC_COLUMNS], res.status, res.error or ""])
+    os.replace(tmp, path)
+    return path
+
+
+def read_results_csv(path: str | Path) -> list[dict[str, str]]:
+    with Path(path).open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+# ------------------------------------------------------------------------------------------------- plots
+
+
+@dataclass(frozen=True)
+class _Point:
+    """What the plots need of one completed job (slope and soil from its resolved scenario, grid or not)."""
+
+    params: dict[str, Any]
+    slope_deg: float
+    soil: str
+    max_slip_pct: float
+    dr_error_pct: float
+    vo_error_pct: float | None
+
+
+def _points(jobs: Sequence[Job], results: Sequence[JobResult]) -> list[_Point]:
+    pts = []
+    for job, res in zip(jobs, results, strict=True):
+        if res.ok and res.metrics is not None:
+            terrain = job.scenario.get("terrain", {})
+            pts.append(_Point(job.params, float(terrain.get("slope", {}).get("slope_deg", 0.0)),
+                              str(terrain.get("material", {}).get("kind", "?")), float(res.metrics["max_slip_pct"]),
+                              float(res.metrics["dr_error_pct"]), res.metrics.get("vo_error_pct")))
+    return pts
+
+
+def _by_slope(pts: Sequence[_Point], value: Callable[[_Point], float | None]):
+    """(slopes, mean, min, max) of ``value`` per slope, NaN-free."""
+    import numpy as np
+
+    groups: dict[float, list[float]] = {}
+    for p in pts:
+        v = value(p)
+        if v is not None and np.isfinite(v):
+            groups.setdefault(p.slope_deg, []).append(float(v))
+    s = sorted(groups)
+    return (np.array(s), np.array([np.mean(groups[k]) for k in s]), np.array([np.min(groups[k]) for k in s]),
+            np.array([np.max(groups[k]) for k in s]))
+
+
+def _figure(size_in: tuple[float, float]):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=size_in, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def plot_slip_vs_slope(pts: Sequence[_Point], path: Path, title: str) -> Path:
+    """Max slip of each drive against slope, one series per soil: mean over seeds, whiskers to min and max."""
+    from rover_sim.plots import DPI
+
+    fig = _figure((6.4, 4.2))
+    ax = fig.add_subplot()
+    for i, soil in enumerate(sorted({p.soil for p in pts})):
+        s, mean, lo, hi = _by_slope([p for p in pts if p.soil == soil], lambda p: p.max_slip_pct)
+        ax.errorbar(s, mean, yerr=[mean - lo, hi - mean], color=f"C{i}", marker="o", capsize=3, label=soil)
+    ax.set_xlabel("slope (deg)")
+    ax.set_ylabel("max slip per drive (%)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(title="soil", fontsize="small")
+    ax.set_title(title)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def plot_error_vs_slope(pts: Sequence[_Point], path: Path, title: str) -> Path:
+    """Final position error (% of distance) of dead reckoning and VO against slope, per soil (mean over seeds)."""
+    from rover_sim.plots import DPI
+
+    fig = _figure((6.4, 4.2))
+    ax = fig.add_subplot()
+    for i, soil in enumerate(sorted({p.soil for p in pts})):
+        mine = [p for p in pts if p.soil == soil]
+        s, mean, lo, hi = _by_slope(mine, lambda p: p.dr_error_pct)
+        ax.errorbar(s, mean, yerr=[mean - lo, hi - mean], color=f"C{i}", linestyle="--", marker="s", capsize=3,
+                    label=f"dead reckoning, {soil}")
+        s, mean, lo, hi = _by_slope(mine, lambda p: p.vo_error_pct)
+        if len(s):
+            ax.errorbar(s, mean, yerr=[mean - lo, hi - mean], color=f"C{i}", linestyle="-", marker="o", capsize=3,
+                        label=f"visual odometry, {soil}")
+    ax.set_xlabel("slope (deg)")
+    ax.set_ylabel("position error (% of distance)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize="small")
+    ax.set_title(title)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def plot_slip_map(pts: Sequence[_Point], x_axis: GridAxis, y_axis: GridAxis, path: Path, title: str) -> Path:
+    """Heatmap of the mean (over seeds and any other axes) max slip over two grid axes; blank where none ran."""
+    import numpy as np
+
+    from rover_sim.plots import DPI
+
+    grid = np.full((len(y_axis.values), len(x_axis.values)), np.nan)
+    for iy, vy in enumerate(y_axis.values):
+        for ix, vx in enumerate(x_axis.values):
+            v = [p.max_slip_pct for p in pts if p.params[x_axis.key] == vx and p.params[y_axis.key] == vy]
+            if v:
+                grid[iy, ix] = float(np.mean(v))
+    fig = _figure((1.6 + 0.9 * len(x_axis.values), 1.4 + 0.6 * len(y_axis.values)))
+    ax = fig.add_subplot()
+    im = ax.imshow(np.ma.masked_invalid(grid), origin="lower", aspect="auto", cmap="magma_r", vmin=0.0)
+    for (iy, ix), v in np.ndenumerate(grid):
+        if np.isfinite(v):
+            ax.text(ix, iy, f"{v:.0f}", ha="center", va="center", fontsize="small",
+                    color="white" if v > 0.6 * np.nanmax(grid) else "black")
+    ax.set_xticks(range(len(x_axis.raw)), x_axis.raw)
+    ax.set_yticks(range(len(y_axis.raw)), y_axis.raw)
+    ax.set_xlabel(x_axis.key)
+    ax.set_ylabel(y_axis.key)
+    fig.colorbar(im, ax=ax, label="mean max slip (%)")
+    ax.set_title(title)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def plot_sweep(
+    plot_dir: Path, axes: Sequence[GridAxis], jobs: Sequence[Job], results: Sequence[JobResult]
+) -> list[Path]:
+    """slip_vs_slope.png, error_vs_slope.png and, with two or more grid axes, slip_map.png over the first two."""
+    pts = _points(jobs, results)
+    if not pts:
+        return []
+    plot_dir.mkdir(parents=True, exist_ok=True)
+    name = jobs[0].scenario.get("name", "")
+    paths = [
+        plot_slip_vs_slope(pts, plot_dir / "slip_vs_slope.png", f"{name}: slip vs slope"),
+        plot_error_vs_slope(pts, plot_dir / "error_vs_slope.png", f"{name}: position error vs slope"),
+    ]
+    if len(axes) >= 2:
+        paths.append(plot_slip_map(pts, axes[0], axes[1], plot_dir / "slip_map.png", f"{name}: slip map"))
+    return paths
