@@ -1,0 +1,131 @@
+"""`rover-sim bench stereo`: MER SAD stereo vs plain OpenCV StereoBM on simulated hazcam pairs with ground truth.
+
+Pairs are rendered at 256x256 from the front hazcams on seeded sand and bedrock terrains with rocks; ground-truth
+disparity ``fx B / Z`` comes from the rendered depth. Scored pixels: terrain or rock (not the rover itself) with
+ground-truth depth within 3 m. ``density`` = fraction of scored pixels that get a disparity; ``bad1`` = fraction of
+those more than 1 px off. Both algorithms run on the same pairs in the same process; time is the median per pair.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nav.camera import StereoRig
+from nav.stereo import StereoParams, compute_disparity, stereobm_baseline
+from rover_sim.physics import RoverSim
+from rover_sim.render import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+from terrains import MaterialSpec, RockSpec, RoughnessSpec, TerrainRecipe, synthesize
+
+MAX_RANGE_M = 3.0
+NUM_DISPARITIES = 32  # hazcam at 256^2: fx ~68 px, B 0.1 m -> 0.35 m range at 20 px
+
+
+@dataclass(frozen=True)
+class SimPair:
+    left: np.ndarray
+    right: np.ndarray
+    gt_disparity_px: np.ndarray  # NaN where not scored
+    rig: StereoRig
+    label: str
+
+
+def simulated_pairs(seeds=(0, 1, 2), materials=("sand", "bedrock"), pair: str = "hazcam_front") -> list[SimPair]:
+    out = []
+    for material in materials:
+        for seed in seeds:
+            recipe = TerrainRecipe(
+                size_m=(10.0, 10.0),
+                cell_size_m=0.04,
+                roughness=RoughnessSpec(rms_m=0.02, correlation_length_m=1.0),
+                rocks=RockSpec(cover_fraction=0.06, min_height_m=0.05, max_height_m=0.3),
+                material=MaterialSpec(kind=material),
+            )
+            terrain = synthesize(recipe, seed)
+            sim = RoverSim(terrain, texture_rgb=terrain_texture(terrain, 100.0, seed))
+            sim.place(0.0, 0.0, float(seed) * 1.3, settle_s=0.5)
+            with StereoRenderer(sim, RenderConfig(resolution_px=256, noise=ImageNoise(seed=seed))) as r:
+                frame = r.render_pair(pair)
+                depth = r.render_depth(f"{pair}_left")
+                seg = r.render_segmentation(f"{pair}_left")
+            m = sim.model
+            ground = np.zeros_like(seg, dtype=bool)
+            valid_ids = seg >= 0
+            body_of = np.where(valid_ids, m.geom_bodyid[np.clip(seg, 0, None)], -1)
+            ground = valid_ids & (body_of == 0)  # world body: terrain and rocks, not the rover
+            gt = np.where(ground & (depth <= MAX_RANGE_M), frame.rig.disparity_from_depth(depth), np.nan)
+            out.append(SimPair(frame.left, frame.right, gt.astype(np.float32), frame.rig, f"{material}/{seed}"))
+    return out
+
+
+def score(disparity: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
+    """(density, bad-1px rate) over the scored pixels."""
+    scored = np.isfinite(gt)
+    has = scored & np.isfinite(disparity)
+    density = has.sum() / max(scored.sum(), 1)
+    bad = (np.abs(disparity[has] - gt[has]) > 1.0).sum() / max(has.sum(), 1)
+    return float(density), float(bad)
+
+
+def _time_ms(fn, repeats: int = 15) -> float:
+    fn()  # warm-up (workspace allocation)
+    t = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        t.append((time.perf_counter() - t0) * 1e3)
+    return float(np.median(t))
+
+
+def bench_stereo(json_path: str | None = None) -> dict:
+    pairs = simulated_pairs()
+    params = StereoParams(num_disparities=NUM_DISPARITIES)
+    rows = []
+    for p in pairs:
+        ours = compute_disparity(p.left, p.right, params)
+        bm = stereobm_baseline(p.left, p.right, NUM_DISPARITIES, params.window_px)
+        rows.append(
+            {
+                "pair": p.label,
+                "ours": score(ours, p.gt_disparity_px),
+                "stereobm": score(bm, p.gt_disparity_px),
+                "ours_ms": _time_ms(lambda p=p: compute_disparity(p.left, p.right, params)),
+                "stereobm_ms": _time_ms(
+                    lambda p=p: stereobm_baseline(p.left, p.right, NUM_DISPARITIES, params.window_px)
+                ),
+            }
+        )
+    agg = {
+        "ours_ms": float(np.median([r["ours_ms"] for r in rows])),
+        "stereobm_ms": float(np.median([r["stereobm_ms"] for r in rows])),
+        "ours_bad1": float(np.mean([r["ours"][1] for r in rows])),
+        "stereobm_bad1": float(np.mean([r["stereobm"][1] for r in rows])),
+        "ours_density": float(np.mean([r["ours"][0] for r in rows])),
+        "stereobm_density": float(np.mean([r["stereobm"][0] for r in rows])),
+    }
+    print("| pair | ours density | ours bad-1px | StereoBM density | StereoBM bad-1px | ours ms | StereoBM ms |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(
+            f"| {r['pair']} | {100 * r['ours'][0]:.1f} % | {100 * r['ours'][1]:.2f} % | {100 * r['stereobm'][0]:.1f} % "
+            f"| {100 * r['stereobm'][1]:.2f} % | {r['ours_ms']:.1f} | {r['stereobm_ms']:.1f} |"
+        )
+    ratio = agg["ours_ms"] / agg["stereobm_ms"]
+    print(
+        f"| **all** | {100 * agg['ours_density']:.1f} % | {100 * agg['ours_bad1']:.2f} % | "
+        f"{100 * agg['stereobm_density']:.1f} % | {100 * agg['stereobm_bad1']:.2f} % | {agg['ours_ms']:.1f} | "
+        f"{agg['stereobm_ms']:.1f} |"
+    )
+    print(
+        f"\nspeed ratio ours/StereoBM = {ratio:.2f} (acceptance <= 1.5); lower bad-1px than StereoBM: "
+        f"{'yes' if agg['ours_bad1'] < agg['stereobm_bad1'] else 'NO'}"
+    )
+    agg["ratio"] = ratio
+    if json_path:
+        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_path).write_text(json.dumps(agg | {"rows": rows}, indent=2))
+    return agg
