@@ -44,6 +44,72 @@ def bench_slip(json: JsonOpt = None, seed: int = 0) -> None:
         raise typer.Exit(code=1)
 
 
+@bench_app.command("render")
+def bench_render_cmd(json: JsonOpt = None) -> None:
+    """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
+    from rover_sim.bench_render import bench_render
+
+    result = bench_render(str(json) if json else None)
+    if result["stereo_pair_256_shadows_ms"] > 40.0:
+        raise typer.Exit(code=1)
+
+
+@bench_app.command("stereo")
+def bench_stereo_cmd(json: JsonOpt = None) -> None:
+    """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px)."""
+    from rover_sim.bench.stereo import bench_stereo
+
+    r = bench_stereo(str(json) if json else None)
+    if r["ratio"] > 1.5 or r["ours_bad1"] >= r["stereobm_bad1"]:
+        raise typer.Exit(code=1)
+
+
+@bench_app.command("autonav")
+def bench_autonav_cmd(
+    json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Number of seeded rock fields.")] = 20
+) -> None:
+    """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away)."""
+    from rover_sim.bench.autonav import bench_autonav
+
+    r = bench_autonav(str(json) if json else None, runs=runs)
+    if r["reached"] < 0.95 * r["runs"] or r["collisions"] > 0:
+        raise typer.Exit(code=1)
+
+
+@app.command("render")
+def render_cmd(
+    scenario: Annotated[str, typer.Argument(help="Scenario whose terrain, sun and start pose to use.")],
+    out: Annotated[Path, typer.Option("--out")] = Path("runs/render"),
+    pair: Annotated[str, typer.Option(help="navcam | hazcam_front | hazcam_rear")] = "navcam",
+    resolution: Annotated[int, typer.Option(help="Image side in pixels.")] = 256,
+    seed: Annotated[int | None, typer.Option()] = None,
+) -> None:
+    """Write a stereo pair, its depth and the camera-model JSON at the scenario's start pose."""
+    import math
+
+    from rover_sim.bench_render import render_to_dir
+    from rover_sim.scenario import load_scenario
+    from rover_sim.world import Sun
+
+    try:
+        sc = load_scenario(scenario, seed=seed)
+    except RoverSimError as e:
+        _fail(e)
+    st = sc.start
+    files = render_to_dir(
+        out,
+        sc.terrain,
+        (st.x_m, st.y_m, math.radians(st.yaw_deg)),
+        which=pair,
+        resolution=resolution,
+        seed=sc.seed,
+        mast_rad=(math.radians(sc.nav.mast_pan_deg), -math.radians(sc.nav.mast_tilt_deg)),
+        sun=Sun(sc.sun.azimuth_deg, sc.sun.elevation_deg, sc.sun.shadows),
+    )
+    for name, path in files.items():
+        typer.echo(f"{name}: {path}")
+
+
 @bench_app.command("vo")
 def bench_vo_cmd(json: JsonOpt = None) -> None:
     """VO cases of the issue: MSSTB rock course, 30 m slope, featureless soil, rover shadow."""

@@ -26,7 +26,7 @@ import numpy as np
 
 from nav.dead_reckoning import DeadReckoner
 from nav.geometry import R_to_rpy, se3_inv
-from nav.trajectory import Pose, Trajectory, write_tum
+from nav.trajectory import Pose, Trajectory, relative_errors, write_tum
 from nav.types import RoverGeometry
 from nav.vo import VisualOdometry
 from rover_sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
@@ -494,7 +494,7 @@ class Mission:
         return m
 
     def _extra(self) -> dict:
-        out: dict = {}
+        out: dict = {"kitti_translation_error_pct": self._kitti()}
         if self.keep_out_info:
             out["keep_out"] = self.keep_out_info
         if self.autonav_stats is not None:
@@ -503,6 +503,17 @@ class Mission:
                 "backtracks": self.autonav_stats.backtracks,
                 "outcome": self.autonav_stats.outcome,
             }
+        return out
+
+    def _kitti(self) -> dict:
+        """KITTI-style mean translational error (% of segment length) over sub-segments of 1, 2, 5 and 10 m."""
+        tr = self.trajectories()
+        truth = tr.pop("truth")
+        lengths = [L for L in (1.0, 2.0, 5.0, 10.0) if L < truth.path_length_m()]
+        out = {}
+        for name, est in tr.items():
+            errs = relative_errors(est, truth, lengths, step_frames=4) if lengths else []
+            out[name] = {f"{e.length_m:g}m": round(e.translation_error_pct, 3) for e in errs}
         return out
 
     def _timing(self, vo_ms: list[float]) -> dict:
