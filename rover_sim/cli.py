@@ -76,6 +76,15 @@ def bench_autonav_cmd(
         raise typer.Exit(code=1)
 
 
+@bench_app.command("dimes")
+def bench_dimes_cmd(json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50) -> None:
+    """DIMES: Monte-Carlo descents over winds and terrains; horizontal velocity error and featureless rejection."""
+    from rover_sim.bench.dimes import bench_dimes
+
+    if not bench_dimes(str(json) if json else None, runs=runs)["passed"]:
+        raise typer.Exit(code=1)
+
+
 @app.command("render")
 def render_cmd(
     scenario: Annotated[str, typer.Argument(help="Scenario whose terrain, sun and start pose to use.")],

@@ -359,7 +359,7 @@ class DescentCameraConfig:
     resolution_px: int = 256
     binning: int = 1  # 1: render at resolution_px; 4: render 1024 and average 4x4 (detector binning)
     fov_deg: float = 45.0
-    read_noise_dn12: float = 3.0  # rms counts of 4095; None-like 0 keeps quantisation only
+    read_noise_dn12: float = 3.0  # rms read noise in 12-bit counts (0: quantisation only), as rover_sim.render
 
     @property
     def native_px(self) -> int:

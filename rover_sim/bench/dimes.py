@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -185,8 +185,8 @@ def bench_dimes(
         "terrains": terrains,
         "features_per_image": params.features_per_image,
         "wall_s": wall_s,
-        "descents": [o.__dict__ for o in outcomes],
-        "featureless": [o.__dict__ for o in featureless],
+        "descents": [asdict(o) for o in outcomes],
+        "featureless": [asdict(o) for o in featureless],
     }
     if json_path:
         Path(json_path).parent.mkdir(parents=True, exist_ok=True)
