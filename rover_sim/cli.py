@@ -85,6 +85,15 @@ def bench_dimes_cmd(json: JsonOpt = None, runs: Annotated[int, typer.Option(help
         raise typer.Exit(code=1)
 
 
+@bench_app.command("sweep")
+def bench_sweep_cmd(json: JsonOpt = None) -> None:
+    """Sweep speed: 8 short jobs serially and on a 2-worker pool (acceptance: parallel <= 0.65x serial)."""
+    from rover_sim.bench.sweep import bench_sweep
+
+    if not bench_sweep(str(json) if json else None)["passed"]:
+        raise typer.Exit(code=1)
+
+
 @app.command("render")
 def render_cmd(
     scenario: Annotated[str, typer.Argument(help="Scenario whose terrain, sun and start pose to use.")],

@@ -34,3 +34,22 @@ class RenderingUnavailable(RoverSimError):
         super().__init__(
             f"offscreen rendering needs EGL ({detail}). On Debian/Ubuntu: apt-get install libegl1 libgl1-mesa-dri"
         )
+
+
+class DaskUnavailable(RoverSimError):
+    """``--scheduler`` was given but dask.distributed is not installed."""
+
+    def __init__(self, detail: str) -> None:
+        super().__init__(
+            f"--scheduler needs dask.distributed ({detail}). Install the extra: pip install 'rover-sim[dask]'"
+        )
+
+
+class SchedulerUnreachable(RoverSimError):
+    """No Dask scheduler answered at the given address."""
+
+    def __init__(self, address: str, detail: str) -> None:
+        super().__init__(
+            f"no Dask scheduler at {address} ({detail}). Start one with `dask scheduler` and workers with "
+            f"`dask worker {address}` on machines that have rover-sim installed"
+        )

@@ -31,11 +31,11 @@ import time
 import traceback
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rover_sim.errors import ConfigError, RoverSimError
+from rover_sim.errors import ConfigError, DaskUnavailable, SchedulerUnreachable
 
 #: metrics.json keys copied into results.csv (the issue's metric set), in column order
 METRIC_COLUMNS = (
@@ -57,25 +57,6 @@ DASK_CONNECT_TIMEOUT_S = 30.0
 # Same thread limits as Dask's nanny (distributed.nanny.pre-spawn-environ), so both backends compute alike and
 # K workers on K cores do not oversubscribe them.
 WORKER_THREAD_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-
-
-class DaskUnavailable(RoverSimError):
-    """``--scheduler`` was given but dask.distributed is not installed."""
-
-    def __init__(self, detail: str) -> None:
-        super().__init__(
-            f"--scheduler needs dask.distributed ({detail}). Install the extra: pip install 'rover-sim[dask]'"
-        )
-
-
-class SchedulerUnreachable(RoverSimError):
-    """No Dask scheduler answered at the given address."""
-
-    def __init__(self, address: str, detail: str) -> None:
-        super().__init__(
-            f"no Dask scheduler at {address} ({detail}). Start one with `dask scheduler` and workers with "
-            f"`dask worker {address}` on machines that have rover-sim installed"
-        )
 
 
 # ------------------------------------------------------------------------------------------------- data types
@@ -258,7 +239,7 @@ def run_job(job: Job, jobs_dir: str) -> JobResult:
         from rover_sim.runner import run_scenario
 
         metrics = run_scenario(scenario, job_dir, record=False)
-        return JobResult(job.job_id, "ok", metrics=asdict(metrics))
+        return JobResult(job.job_id, "ok", metrics=metrics.deterministic_dict())  # = its metrics.json
     except Exception as e:  # noqa: BLE001 - isolation boundary: any failure of one job is reported, the sweep goes on
         (job_dir / "metrics.json").unlink(missing_ok=True)  # outputs written before the failure are not a result
         return _failed(job, e)
@@ -278,8 +259,16 @@ def _record(jobs_dir: Path, job: Job, result: JobResult) -> None:
         (job_dir / "error.json").unlink(missing_ok=True)
     else:
         (job_dir / "metrics.json").unlink(missing_ok=True)
-        _write_json(job_dir / "error.json", {"job_id": job.job_id, "params": job.params, "seed": job.seed,
-                                              "error": result.error, "traceback": result.traceback})
+        _write_json(
+            job_dir / "error.json",
+            {
+                "job_id": job.job_id,
+                "params": job.params,
+                "seed": job.seed,
+                "error": result.error,
+                "traceback": result.traceback,
+            },
+        )
 
 
 # ------------------------------------------------------------------------------------------------- executors
@@ -322,9 +311,7 @@ def init_worker() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _run_on_pool(
-    jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, workers: int
-) -> Iterator[tuple[Job, JobResult]]:
+def _run_on_pool(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, workers: int) -> Iterator[tuple[Job, JobResult]]:
     """A local ``spawn`` process pool: each worker imports rover_sim afresh, none inherits a GL context."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -340,8 +327,15 @@ def _run_on_pool(
             try:
                 yield job, fut.result()
             except BrokenProcessPool as e:
-                yield job, _failed(job, e, "a worker process crashed, taking this job with it (re-run the sweep "
-                                           "to retry; completed jobs are skipped): ")
+                yield (
+                    job,
+                    _failed(
+                        job,
+                        e,
+                        "a worker process crashed, taking this job with it (re-run the sweep "
+                        "to retry; completed jobs are skipped): ",
+                    ),
+                )
             except Exception as e:  # noqa: BLE001 - e.g. a result that cannot be pickled: this job fails, not all
                 yield job, _failed(job, e)
         finished = True
@@ -355,9 +349,7 @@ def _run_on_pool(
                 proc.terminate()
 
 
-def _run_on_dask(
-    jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, scheduler: str
-) -> Iterator[tuple[Job, JobResult]]:
+def _run_on_dask(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, scheduler: str) -> Iterator[tuple[Job, JobResult]]:
     """Submit every job to a Dask cluster (``retries=2``: a task whose worker dies runs again elsewhere)."""
     try:
         from distributed import Client, as_completed
@@ -370,8 +362,9 @@ def _run_on_dask(
     try:
         token = uuid.uuid4().hex[:8]  # fresh keys: never pick up another sweep's cached task on a shared cluster
         futures = {
-            client.submit(job_fn, job, jobs_dir, key=f"rover-sim-{job.job_id}-{token}", retries=DASK_RETRIES,
-                          pure=False): job
+            client.submit(
+                job_fn, job, jobs_dir, key=f"rover-sim-{job.job_id}-{token}", retries=DASK_RETRIES, pure=False
+            ): job
             for job in jobs
         }
         for fut in as_completed(futures):
@@ -420,14 +413,22 @@ def run_sweep(
     axes = [g if isinstance(g, GridAxis) else parse_grid(g) for g in grid]
     jobs = plan_jobs(scenario, axes, seeds, overrides)
     jobs_dir.mkdir(parents=True, exist_ok=True)
-    _write_json(out / "sweep.json", {
-        "scenario": str(scenario), "grid": {a.key: list(a.raw) for a in axes}, "overrides": list(overrides),
-        "seeds": sorted({j.seed for j in jobs}), "jobs": {j.job_id: {"params": j.params, "seed": j.seed} for j in jobs},
-    })
+    _write_json(
+        out / "sweep.json",
+        {
+            "scenario": str(scenario),
+            "grid": {a.key: list(a.raw) for a in axes},
+            "overrides": list(overrides),
+            "seeds": sorted({j.seed for j in jobs}),
+            "jobs": {j.job_id: {"params": j.params, "seed": j.seed} for j in jobs},
+        },
+    )
     results: dict[str, JobResult] = {}
     for job in jobs:
-        _write_json(jobs_dir / job.job_id / "job.json", {"job_id": job.job_id, "params": job.params,
-                                                         "seed": job.seed, "scenario": job.scenario})
+        _write_json(
+            jobs_dir / job.job_id / "job.json",
+            {"job_id": job.job_id, "params": job.params, "seed": job.seed, "scenario": job.scenario},
+        )
         done = load_completed(jobs_dir / job.job_id)
         if done is not None:
             results[job.job_id] = JobResult(job.job_id, "ok", metrics=done, cached=True)
@@ -476,8 +477,15 @@ def write_results_csv(path: Path, axes: Sequence[GridAxis], jobs: Sequence[Job],
         w.writerow(result_columns(axes))
         for job, res in zip(jobs, results, strict=True):
             m = res.metrics or {"scenario": job.scenario.get("name"), "seed": job.seed}
-            w.writerow([job.job_id, *[_cell(job.params[a.key]) for a in axes],
-                        *[_cell(m.get(k)) for k in METRIC_COLUMNS], res.status, res.error or ""])
+            w.writerow(
+                [
+                    job.job_id,
+                    *[_cell(job.params[a.key]) for a in axes],
+                    *[_cell(m.get(k)) for k in METRIC_COLUMNS],
+                    res.status,
+                    res.error or "",
+                ]
+            )
     os.replace(tmp, path)
     return path
 
@@ -507,9 +515,16 @@ def _points(jobs: Sequence[Job], results: Sequence[JobResult]) -> list[_Point]:
     for job, res in zip(jobs, results, strict=True):
         if res.ok and res.metrics is not None:
             terrain = job.scenario.get("terrain", {})
-            pts.append(_Point(job.params, float(terrain.get("slope", {}).get("slope_deg", 0.0)),
-                              str(terrain.get("material", {}).get("kind", "?")), float(res.metrics["max_slip_pct"]),
-                              float(res.metrics["dr_error_pct"]), res.metrics.get("vo_error_pct")))
+            pts.append(
+                _Point(
+                    job.params,
+                    float(terrain.get("slope", {}).get("slope_deg", 0.0)),
+                    str(terrain.get("material", {}).get("kind", "?")),
+                    float(res.metrics["max_slip_pct"]),
+                    float(res.metrics["dr_error_pct"]),
+                    res.metrics.get("vo_error_pct"),
+                )
+            )
     return pts
 
 
@@ -523,8 +538,12 @@ def _by_slope(pts: Sequence[_Point], value: Callable[[_Point], float | None]):
         if v is not None and np.isfinite(v):
             groups.setdefault(p.slope_deg, []).append(float(v))
     s = sorted(groups)
-    return (np.array(s), np.array([np.mean(groups[k]) for k in s]), np.array([np.min(groups[k]) for k in s]),
-            np.array([np.max(groups[k]) for k in s]))
+    return (
+        np.array(s),
+        np.array([np.mean(groups[k]) for k in s]),
+        np.array([np.min(groups[k]) for k in s]),
+        np.array([np.max(groups[k]) for k in s]),
+    )
 
 
 def _figure(size_in: tuple[float, float]):
@@ -563,12 +582,28 @@ def plot_error_vs_slope(pts: Sequence[_Point], path: Path, title: str) -> Path:
     for i, soil in enumerate(sorted({p.soil for p in pts})):
         mine = [p for p in pts if p.soil == soil]
         s, mean, lo, hi = _by_slope(mine, lambda p: p.dr_error_pct)
-        ax.errorbar(s, mean, yerr=[mean - lo, hi - mean], color=f"C{i}", linestyle="--", marker="s", capsize=3,
-                    label=f"dead reckoning, {soil}")
+        ax.errorbar(
+            s,
+            mean,
+            yerr=[mean - lo, hi - mean],
+            color=f"C{i}",
+            linestyle="--",
+            marker="s",
+            capsize=3,
+            label=f"dead reckoning, {soil}",
+        )
         s, mean, lo, hi = _by_slope(mine, lambda p: p.vo_error_pct)
         if len(s):
-            ax.errorbar(s, mean, yerr=[mean - lo, hi - mean], color=f"C{i}", linestyle="-", marker="o", capsize=3,
-                        label=f"visual odometry, {soil}")
+            ax.errorbar(
+                s,
+                mean,
+                yerr=[mean - lo, hi - mean],
+                color=f"C{i}",
+                linestyle="-",
+                marker="o",
+                capsize=3,
+                label=f"visual odometry, {soil}",
+            )
     ax.set_xlabel("slope (deg)")
     ax.set_ylabel("position error (% of distance)")
     ax.grid(True, alpha=0.3)
@@ -595,8 +630,15 @@ def plot_slip_map(pts: Sequence[_Point], x_axis: GridAxis, y_axis: GridAxis, pat
     im = ax.imshow(np.ma.masked_invalid(grid), origin="lower", aspect="auto", cmap="magma_r", vmin=0.0)
     for (iy, ix), v in np.ndenumerate(grid):
         if np.isfinite(v):
-            ax.text(ix, iy, f"{v:.0f}", ha="center", va="center", fontsize="small",
-                    color="white" if v > 0.6 * np.nanmax(grid) else "black")
+            ax.text(
+                ix,
+                iy,
+                f"{v:.0f}",
+                ha="center",
+                va="center",
+                fontsize="small",
+                color="white" if v > 0.6 * np.nanmax(grid) else "black",
+            )
     ax.set_xticks(range(len(x_axis.raw)), x_axis.raw)
     ax.set_yticks(range(len(y_axis.raw)), y_axis.raw)
     ax.set_xlabel(x_axis.key)
