@@ -7,11 +7,9 @@ with a rock at least 25 cm tall), and the GESTALT cycle time (stereo + map + vot
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 import numpy as np
 
+from rover_sim.bench import write_json
 from rover_sim.runner import run_scenario
 from rover_sim.scenario import scenario_from_dict
 
@@ -84,7 +82,5 @@ def bench_autonav(json_path: str | None = None, runs: int = 20, first_seed: int 
         f"| {result['runs']} | {result['reached']} ({100 * result['reached'] / max(1, len(rows)):.0f} %) | "
         f"{result['collisions']} | {result['cycle_ms_median']:.1f} | >= 95 % reached, 0 collisions, <= 50 ms |"
     )
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(result, indent=2))
+    write_json(json_path, result)
     return result

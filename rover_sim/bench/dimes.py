@@ -17,15 +17,14 @@ context exists).
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from nav.dimes import DimesParams, DimesResult, estimate_velocity
+from rover_sim.bench import write_json
 from rover_sim.descent import FEATURELESS_TERRAIN, DescentConditions, DescentRun, DescentWorld
 
 ACCEPT_1SIGMA_MPS = 1.5
@@ -188,7 +187,5 @@ def bench_dimes(
         "descents": [asdict(o) for o in outcomes],
         "featureless": [asdict(o) for o in featureless],
     }
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(result, indent=2))
+    write_json(json_path, result)
     return result

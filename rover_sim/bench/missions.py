@@ -11,6 +11,7 @@ import json
 import math
 from pathlib import Path
 
+from rover_sim.bench import write_json
 from rover_sim.runner import Metrics, run_scenario
 from rover_sim.scenario import catalogue, load_scenario
 
@@ -65,9 +66,7 @@ def bench_vo(json_path: str | None = None, out_root: Path = Path("runs/bench_vo"
             f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {r['false_positives']} | "
             f"{_fmt(r['vo_step_ms_median'])} | {accept[case]} | {'yes' if r['passed'] else 'NO'} |"
         )
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(results, indent=2))
+    write_json(json_path, results)
     return results
 
 
@@ -114,9 +113,7 @@ def bench_suite(
             f"| {r['scenario']} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | "
             f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {'yes' if good else 'NO'} | {note} |"
         )
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(rows, indent=2))
+    write_json(json_path, rows)
     if update_baseline:
         keep = ("vo_error_pct", "vo_convergence_pct", "false_positives", "dr_error_pct", "max_slip_pct")
         merged = baseline | {r["scenario"]: {k: r[k] for k in keep} for r in rows}

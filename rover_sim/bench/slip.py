@@ -10,13 +10,12 @@ wheel-soil law versus bare MuJoCo stepping of the same model and timestep (the l
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 
+from rover_sim.bench import write_json
 from rover_sim.drive import MAX_WHEEL_SPEED_M_S, TICK_S, Straight, execute
 from rover_sim.physics import RoverSim
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
@@ -148,7 +147,5 @@ def run(json_path: str | None = None, slopes_deg: tuple[float, ...] = SLOPES_DEG
         "all_pass": monotonic and drift < 0.01 and rtf >= 20 and ratio >= 0.3 and all(passes(r) for r in rows),
         "rows": [asdict(r) for r in rows],
     }
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(result, indent=2))
+    write_json(json_path, result)
     return result

@@ -8,15 +8,14 @@ those more than 1 px off. Both algorithms run on the same pairs in the same proc
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from nav.camera import StereoRig
 from nav.stereo import StereoParams, compute_disparity, stereobm_baseline
+from rover_sim.bench import write_json
 from rover_sim.physics import RoverSim
 from rover_sim.render import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, TerrainRecipe, synthesize
@@ -125,7 +124,5 @@ def bench_stereo(json_path: str | None = None) -> dict:
         f"{'yes' if agg['ours_bad1'] < agg['stereobm_bad1'] else 'NO'}"
     )
     agg["ratio"] = ratio
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(agg | {"rows": rows}, indent=2))
+    write_json(json_path, agg | {"rows": rows})
     return agg

@@ -12,12 +12,12 @@ average and a CPU probe (the cores that ``workers`` busy processes actually get)
 
 from __future__ import annotations
 
-import json
 import os
 import tempfile
 import time
 from pathlib import Path
 
+from rover_sim.bench import write_json
 from rover_sim.sweep import SweepResult, default_workers, run_sweep
 
 GRID = ("terrain.slope.slope_deg=0,5,10,15", "terrain.material.kind=sand,bedrock")
@@ -151,9 +151,7 @@ def bench_sweep(
             f"warning: other processes took CPU during the run (probe {cores_before:.2f} / {cores_after:.2f} of "
             f"{workers} cores): the ratio measures the machine, not the sweep; run again on a quiet machine"
         )
-    if json_path:
-        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(json_path).write_text(json.dumps(result, indent=2))
+    write_json(json_path, result)
     return result
 
 
