@@ -92,7 +92,13 @@ _WHEEL_CENTERS = [(x, y, -0.525 + _WHEEL_RADIUS_M) for x in (0.55, 0.0, -0.55) f
 
 @runtime_checkable
 class Recorder(Protocol):
-    """What the runner logs. ``RerunRecorder`` writes an ``.rrd``; ``NullRecorder`` does nothing."""
+    """What the runner logs. ``RerunRecorder`` writes an ``.rrd``; ``NullRecorder`` does nothing.
+
+    ``wants_images()`` tells the runner whether extra, recording-only products (dense stereo of the VO pairs) are
+    worth computing.
+    """
+
+    def wants_images(self) -> bool: ...
 
     def log_terrain(self, terrain: Terrain) -> None: ...
 
@@ -156,6 +162,9 @@ class Recorder(Protocol):
 
 class NullRecorder:
     """A recorder that records nothing (kiss-icp ``StubVisualizer``): run without ``if record:`` branches."""
+
+    def wants_images(self) -> bool:
+        return False
 
     def log_terrain(self, terrain: Terrain) -> None:
         pass
@@ -322,6 +331,9 @@ class RerunRecorder:
     ``segment_points`` bound the trajectory cost (module docstring). Call :meth:`close` (or use ``with``) so
     the file gets its footer; a file cut short without one is still readable with ``RrdReader(...).stream()``.
     """
+
+    def wants_images(self) -> bool:
+        return True
 
     def __init__(
         self,

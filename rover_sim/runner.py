@@ -24,8 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from nav.camera import transform_points
 from nav.dead_reckoning import DeadReckoner
 from nav.geometry import R_to_rpy, se3_inv
+from nav.stereo import StereoParams, range_image
 from nav.trajectory import Pose, Trajectory, relative_errors, write_tum
 from nav.types import RoverGeometry
 from nav.vo import VisualOdometry
@@ -155,6 +157,7 @@ class Mission:
         )
         # The camera model flight software uses: calibrated at the commanded mast pointing, fixed until repointed
         self._nav_rig = self.renderer.rig(scenario.nav.camera)
+        self._stereo_params = StereoParams(num_disparities=64)
         # The operator-given start pose (from the previous localisation); estimators never see truth after this.
         start = Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz())
         self.dr = DeadReckoner(self.geom, start)
@@ -428,7 +431,14 @@ class Mission:
         name = self.sc.nav.camera
         t = self.sim.time_s
         self.rec.log_camera(name, frame.rig, t)
-        self.rec.log_stereo_images(name, t, self.step, frame.left, frame.right)
+        disparity = None
+        if self.rec.wants_images():
+            # dense SAD stereo of the VO pair, for the recording only (placed with the onboard pose)
+            ri = range_image(frame.left, frame.right, frame.rig, self._stereo_params)
+            disparity = ri.disparity_px
+            pts = transform_points(self.onboard.pose.as_matrix(), ri.points_rover_m())
+            self.rec.log_points(name, t, self.step, pts[np.linalg.norm(pts[:, :2] - pts[:, :2].mean(0), axis=1) < 15])
+        self.rec.log_stereo_images(name, t, self.step, frame.left, frame.right, disparity)
         if res.tracks is not None and len(res.tracks):
             inl = res.inliers if res.inliers is not None else np.ones(len(res.tracks), bool)
             self.rec.log_vo_features(name, t, self.step, res.tracks.uv_prev_left, res.tracks.uv_cur_left, inl)

@@ -81,6 +81,8 @@ def test_recording_has_the_entity_tree(tiny_run):
     assert counts["/world/rover/navcam/left/image"] == 3  # the initial pair + one per VO step
     assert counts["/world/rover/navcam/right/image"] == 3
     assert counts["/world/rover/navcam/left/features"] == 2
+    assert counts["/world/rover/navcam/left/depth"] == 3  # dense SAD stereo of each pair
+    assert counts["/world/points/navcam"] == 3
     for name in ("truth", "dead_reckoning", "vo"):
         assert any(k.startswith(f"/world/trajectories/{name}/") for k in counts), name
     assert counts.get("/events", 0) >= 1
