@@ -61,7 +61,7 @@ def pixel_ray_world(model, data, cam_name: str, cam, uv) -> tuple:
 
 
 @dataclass
-class RenderWorld:
+class MarkedWorld:
     sim: RoverSim
     markers_xyz: dict[str, np.ndarray]  # world position of each painted marker (on the rendered surface)
     texture_rgb: np.ndarray
@@ -77,7 +77,7 @@ def _placed_sim(terrain: Terrain, texture_rgb: np.ndarray | None) -> RoverSim:
 
 
 @pytest.fixture(scope="session")
-def render_world() -> RenderWorld:
+def render_world() -> MarkedWorld:
     """Textured world (low-contrast soil, bright marker discs at known places), rover parked, sun behind it."""
     terrain = render_terrain()
     probe = _placed_sim(terrain, None)  # same placement: find where the markers must go
@@ -97,7 +97,7 @@ def render_world() -> RenderWorld:
     rgb = texture_rgb_u8(albedo)
     sim = _placed_sim(terrain, rgb)
     np.testing.assert_allclose(sim.position_m(), probe.position_m(), atol=1e-9)  # texture never moves physics
-    return RenderWorld(sim, markers, rgb)
+    return MarkedWorld(sim, markers, rgb)
 
 
 @pytest.fixture(scope="session")

@@ -113,6 +113,34 @@ def test_render_marker_in_mer_binned_images(render_world) -> None:
     assert np.linalg.norm(bright_blob_centroid(frame.left, mask) - expected) < 1.0
 
 
+def test_render_physics_hfield_drape_matches(render_world) -> None:
+    """The texture world.py drapes on the physics hfield (what a plain MuJoCo renderer or viewer shows) is
+    oriented like the render-only tiles: the navcam marker lands on its projection there too."""
+    import mujoco
+
+    sim = render_world.sim
+    r = mujoco.Renderer(sim.model, 256, 256)
+    try:
+        r.update_scene(sim.data, "navcam_left")
+        grey = r.render().astype(np.float32) @ np.array([0.299, 0.587, 0.114], dtype=np.float32)
+        r.enable_segmentation_rendering()
+        seg = r.render()
+    finally:
+        r.close()
+    mask = (seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)) & (seg[..., 0] == sim.model.geom("terrain").id)
+    cam = stereo_rig_left(sim)
+    expected = project_world(sim, cam, render_world.markers_xyz["navcam_left"])
+    vv, uu = np.indices(mask.shape)
+    near = np.hypot(uu - expected[0], vv - expected[1]) < 40  # the hazcam's marker is in view too (no shadow)
+    assert np.linalg.norm(bright_blob_centroid(grey, mask & near) - expected) < 1.0
+
+
+def stereo_rig_left(sim) -> PinholeCamera:
+    from rover_sim.cameras import stereo_rig
+
+    return stereo_rig(sim.model, sim.data, "navcam", 256).left
+
+
 # ------------------------------------------------------------------------------------------- depth
 
 
@@ -226,7 +254,7 @@ def test_render_culling_and_lod_do_not_change_the_picture(render_world, render_r
     render_renderer.shadows = True
     fast = render_renderer.render_pair("navcam")
     assert fast.meta["tiles_drawn"] < len(render_renderer.world.tiles.boxes)
-    with StereoRenderer(sim, RenderConfig(cull=False, lod=False)) as full:
+    with StereoRenderer(sim, RenderConfig(cull=False, lod=False, terrain_casts_shadows=True)) as full:
         ref = full.render_pair("navcam")
     diff = np.abs(fast.left.astype(int) - ref.left.astype(int))
     assert diff.mean() < 0.5 and (diff > 8).mean() < 0.002, (diff.mean(), (diff > 8).mean())
