@@ -1,0 +1,206 @@
+"""`rover-sim bench rocks`: rock-based cross-site localisation on the ``rock_localization`` scenario.
+
+The rover starts at the first site and drives to the others with the runner's VO-corrected goto (dead reckoning and
+VO are both measured on this drive: the runner keeps a wheel/IMU dead reckoner beside the VO-corrected one). At
+every site it takes a navcam stereo panorama; rocks are extracted and modelled, matched between every two sites up to
+26 m apart, and the chain of sites is adjusted (:mod:`rover_sim.rock_sites`, :mod:`nav.rocks`). Figures against the
+terrain's rock list and the simulator's true poses:
+
+* extraction: recall of generated rocks taller than 20 cm within 30 m of each site, precision of the extracted
+  rocks within 30 m (summed over the sites);
+* modelling: median model RMS and model-type agreement of those rocks;
+* matching: fraction of matches between the same generated rock, over all site pairs up to 26 m apart, and the
+  site-to-site position error in % of the separation (worst pair);
+* chain: mean position error over the sites after the first, dead reckoning vs VO vs adjusted.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rover_sim.rock_sites import (
+    ExtractionEval,
+    MatchEval,
+    RockSiteSurvey,
+    SurveyConfig,
+    adjust_chain,
+    evaluate_chain,
+    evaluate_extraction,
+    evaluate_match,
+)
+from rover_sim.scenario import load_scenario
+
+SCENARIO = "rock_localization"
+MAX_MATCH_SEPARATION_M = 26.0
+ACCEPT = {
+    "recall": 0.90,
+    "precision": 0.90,
+    "median_rms_m": 0.04,
+    "match_correct_frac": 0.90,
+    "site_error_pct": 2.0,
+}
+
+
+def bench_rocks(json_path: str | None = None, scenario: str = SCENARIO, config: SurveyConfig = SurveyConfig()) -> dict:
+    """Run the survey, print the markdown tables, write ``json_path`` (if given) and return the results."""
+    t0 = time.perf_counter()
+    sc = load_scenario(scenario)
+
+    def progress(msg: str) -> None:
+        print(f"  [{time.perf_counter() - t0:6.0f} s] {msg}", flush=True)
+
+    with RockSiteSurvey(sc, config, progress=progress) as sv:
+        sites = sv.run()
+        terrain = sv.terrain
+    wall_survey = time.perf_counter() - t0
+
+    # extraction and modelling
+    per_site = [evaluate_extraction(s, terrain) for s in sites]
+    total = per_site[0]
+    for e in per_site[1:]:
+        total = total + e
+    # matching: every pair of sites within 26 m (estimated), as the chain does
+    chain = adjust_chain(sites)
+    pairs: list[MatchEval] = []
+    for (i, j), m in sorted(chain.matches.items()):
+        pairs.append(evaluate_match(sites[i], sites[j], m, terrain))
+    tried = [
+        (i, j)
+        for i in range(len(sites))
+        for j in range(i + 1, len(sites))
+        if np.linalg.norm(sites[i].T_world_rover_onboard[:2, 3] - sites[j].T_world_rover_onboard[:2, 3])
+        <= MAX_MATCH_SEPARATION_M
+    ]
+    ce = evaluate_chain(sites, chain)
+    n_match = sum(p.n_matches for p in pairs)
+    result = {
+        "recall": total.recall,
+        "precision": total.precision,
+        "median_rms_m": float(np.median(total.rms_m)) if total.rms_m else float("nan"),
+        "match_correct_frac": sum(p.n_correct for p in pairs) / n_match if n_match else float("nan"),
+        "site_error_pct": max((p.error_pct for p in pairs), default=float("nan")),
+        "chain_error_m": {
+            "dead_reckoning": float(np.mean(ce.dead_reckoning[1:])),
+            "vo": float(np.mean(ce.vo[1:])),
+            "adjusted": float(np.mean(ce.adjusted[1:])),
+        },
+        # extras
+        "model_type_match_frac": float(np.mean(total.type_match)) if total.type_match else float("nan"),
+        "model_type_match_by_range": _by_range(total),
+        "chain_final_error_m": {
+            "dead_reckoning": float(ce.dead_reckoning[-1]),
+            "vo": float(ce.vo[-1]),
+            "adjusted": float(ce.adjusted[-1]),
+            "adjusted_incremental": float(ce.adjusted_incremental[-1]),
+        },
+        "chain_errors_per_site_m": {
+            "dead_reckoning": ce.dead_reckoning.tolist(),
+            "vo": ce.vo.tolist(),
+            "adjusted": ce.adjusted.tolist(),
+            "adjusted_incremental": ce.adjusted_incremental.tolist(),
+        },
+        "site_pairs": [
+            {
+                "sites": [p.site_a, p.site_b],
+                "separation_m": p.separation_m,
+                "matches": p.n_matches,
+                "correct": p.n_correct,
+                "error_pct": p.error_pct,
+                "odometry_error_pct": 100.0 * p.odometry_error_m / p.separation_m,
+            }
+            for p in pairs
+        ],
+        "site_pairs_without_match": [list(t) for t in tried if t not in chain.matches],
+        "sites": [
+            {
+                "recall": e.recall,
+                "precision": e.precision,
+                "n_rocks": len(s.rocks),
+                "n_points": s.n_points,
+                "timings_s": {k: round(v, 1) for k, v in s.timings_s.items()},
+            }
+            for s, e in zip(sites, per_site, strict=True)
+        ],
+        "chain_odometry": "measured: runner goto drive, wheel/IMU dead reckoning and VO-corrected onboard estimate",
+        "wall_s": time.perf_counter() - t0,
+        "survey_wall_s": wall_survey,
+    }
+    _print(result, per_site, pairs)
+    if json_path:
+        Path(json_path).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_path).write_text(json.dumps(result, indent=2))
+    return result
+
+
+def _by_range(e: ExtractionEval) -> dict[str, float]:
+    r = np.asarray(e.range_m)
+    t = np.asarray(e.type_match, dtype=float)
+    out = {}
+    for lo, hi in ((0, 10), (10, 20), (20, 30)):
+        sel = (r >= lo) & (r < hi)
+        out[f"{lo}-{hi} m"] = float(t[sel].mean()) if sel.any() else float("nan")
+    return out
+
+
+def passes(result: dict) -> bool:
+    c = result["chain_error_m"]
+    return (
+        result["recall"] >= ACCEPT["recall"]
+        and result["precision"] >= ACCEPT["precision"]
+        and result["median_rms_m"] <= ACCEPT["median_rms_m"]
+        and result["match_correct_frac"] >= ACCEPT["match_correct_frac"]
+        and result["site_error_pct"] <= ACCEPT["site_error_pct"]
+        and c["adjusted"] < min(c["dead_reckoning"], c["vo"])
+    )
+
+
+def _print(result: dict, per_site: list[ExtractionEval], pairs: list[MatchEval]) -> None:
+    def ok(flag: bool) -> str:
+        return "yes" if flag else "NO"
+
+    c = result["chain_error_m"]
+    print("| figure | measured | acceptance | ok |")
+    print("|---|---:|---|:-:|")
+    print(f"| extraction recall (rocks > 20 cm, <= 30 m) | {result['recall']:.3f} | >= 0.90 "
+          f"| {ok(result['recall'] >= ACCEPT['recall'])} |")  # fmt: skip
+    print(f"| extraction precision (<= 30 m) | {result['precision']:.3f} | >= 0.90 "
+          f"| {ok(result['precision'] >= ACCEPT['precision'])} |")  # fmt: skip
+    print(f"| median model RMS (rocks > 20 cm) | {100 * result['median_rms_m']:.2f} cm | <= 4 cm "
+          f"| {ok(result['median_rms_m'] <= ACCEPT['median_rms_m'])} |")  # fmt: skip
+    by = result["model_type_match_by_range"]
+    print(f"| model type = generating shape | {result['model_type_match_frac']:.2f} (0-10 m {by['0-10 m']:.2f}, "
+          f"10-20 m {by['10-20 m']:.2f}, 20-30 m {by['20-30 m']:.2f}) | (reported) | - |")  # fmt: skip
+    print(f"| correct matches (pairs <= 26 m) | {result['match_correct_frac']:.3f} | >= 0.90 "
+          f"| {ok(result['match_correct_frac'] >= ACCEPT['match_correct_frac'])} |")  # fmt: skip
+    print(f"| site-to-site error, worst pair | {result['site_error_pct']:.2f} % | <= 2 % "
+          f"| {ok(result['site_error_pct'] <= ACCEPT['site_error_pct'])} |")  # fmt: skip
+    best = c["adjusted"] < min(c["dead_reckoning"], c["vo"])
+    print(f"| chain: mean site error DR / VO / adjusted | {c['dead_reckoning']:.3f} / {c['vo']:.3f} / "
+          f"{c['adjusted']:.3f} m | adjusted lowest | {ok(best)} |")  # fmt: skip
+    print()
+    print("| site | rocks | recall | precision | points | render s | stereo s | extract s |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for k, (s, e) in enumerate(zip(result["sites"], per_site, strict=True)):
+        t = s["timings_s"]
+        print(f"| {k} | {s['n_rocks']} | {e.n_found}/{e.n_true} | {e.n_correct}/{e.n_extracted} | {s['n_points']} "
+              f"| {t.get('render', 0):.0f} | {t.get('stereo', 0):.0f} | {t.get('extract', 0):.0f} |")  # fmt: skip
+    print()
+    print("| sites | separation (m) | matches | correct | error (% of sep.) | odometry error (% of sep.) |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for p in pairs:
+        print(f"| {p.site_a}-{p.site_b} | {p.separation_m:.1f} | {p.n_matches} | {p.n_correct} | {p.error_pct:.2f} "
+              f"| {100 * p.odometry_error_m / p.separation_m:.2f} |")  # fmt: skip
+    if result["site_pairs_without_match"]:
+        print(f"\nsite pairs within 26 m without a match: {result['site_pairs_without_match']}")
+    print()
+    per = result["chain_errors_per_site_m"]
+    print("| site | DR error (m) | VO error (m) | adjusted (m) | adjusted when added (m) |")
+    print("|---:|---:|---:|---:|---:|")
+    for k in range(len(per["vo"])):
+        print(f"| {k} | {per['dead_reckoning'][k]:.3f} | {per['vo'][k]:.3f} | {per['adjusted'][k]:.3f} "
+              f"| {per['adjusted_incremental'][k]:.3f} |")  # fmt: skip
+    print(f"\nDR and VO are measured on the drive ({result['chain_odometry']}); wall {result['wall_s']:.0f} s.")

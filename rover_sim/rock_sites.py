@@ -1,0 +1,424 @@
+"""Rock-based cross-site localisation in the simulator: drive to sites, navcam stereo panoramas, evaluation.
+
+The pipeline object (:class:`RockSiteSurvey`) owns a :class:`rover_sim.runner.Mission` (terrain, physics, sensors,
+dead reckoning, VO) and a high-resolution navcam renderer; the algorithms in :mod:`nav.rocks` know none of them.
+A scenario's sites are its start pose plus the end of every ``goto`` command (``scenarios/rock_localization.toml``):
+the rover drives to each with the runner's VO-corrected goto, stops, and takes a panorama:
+
+1. the mast sweeps the navcam pair in pan (``pan_step_deg``) at each ``elevations_deg``; every pair is rendered at
+   ``resolution_px`` and matched by :func:`nav.rocks.panorama_points` (binned near field, full-resolution far field);
+2. rover-frame points are mapped into the world through the **onboard pose estimate** (VO-corrected dead
+   reckoning; never the truth), the rover's own body is cut out, the cloud is cropped to ``max_range_m`` and thinned
+   to ``voxel_m``;
+3. :func:`nav.rocks.extract_rocks` extracts and models the rocks.
+
+The chain of sites is then adjusted by :class:`nav.rocks.SiteChain`: matches between every two sites within 26 m
+(estimated) become tie points. Ground truth (the terrain's rock list, the simulator's rover pose) is used only by the
+``evaluate_*`` functions below: to map a site's estimated frame onto the true world (truth pose composed with the
+inverse onboard pose) and to associate extracted rocks with the generated ones.
+
+Dead reckoning and VO estimates come from the same drive: the runner keeps a pure wheel/IMU dead reckoner beside
+the onboard (VO-corrected) one, so both are measured, not simulated.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from nav.geometry import quat_wxyz_to_R
+from nav.rocks import (
+    ChainParams,
+    ExtractedRock,
+    PanoramaStereoParams,
+    Pose4,
+    RockParams,
+    SiteChain,
+    SiteMatch,
+    SiteRocks,
+    extract_rocks,
+    panorama_points,
+    voxel_downsample,
+)
+from rover_sim.drive import TICK_S
+from rover_sim.runner import Mission
+from rover_sim.scenario import GotoCmd, Scenario
+from terrains import Rock, Terrain
+
+ROVER_BOX_HALF_M = (1.2, 1.45)  # rover-frame |x|, |y| of the rover's own body, wings and wheels: points cut out
+MAST_SETTLE_S = 1.5  # mast servo settling after a pan step (it tracks to ~1e-5 rad in 2 s)
+
+
+@dataclass(frozen=True)
+class SurveyConfig:
+    """How a site's panorama is taken and processed."""
+
+    resolution_px: int = 2048  # navcam images of the panorama (flight navcams: 1024; see PanoramaStereoParams)
+    pan_step_deg: float = 40.0  # 45 deg field of view: 5 deg overlap
+    elevations_deg: tuple[float, ...] = (-10.0,)  # -10 deg: the frame spans 2.2 m from the mast to the horizon
+    max_range_m: float = 32.0  # points farther than this (horizontally) from the cameras are dropped
+    voxel_m: float = 0.02  # thinning of the dense near field
+    shadows: bool = True
+    shadow_half_extent_m: float = 30.0  # rocks cast shadows across the whole panorama
+    image_noise: bool = True
+    stereo: PanoramaStereoParams = PanoramaStereoParams()
+    rocks: RockParams = RockParams()
+
+
+@dataclass
+class SiteSurvey:
+    """One site: the poses (truth kept for evaluation only), the ground points and the extracted rocks."""
+
+    index: int
+    t_s: float
+    T_world_rover_true: np.ndarray  # (4, 4) evaluation only
+    T_world_rover_dr: np.ndarray  # (4, 4) wheel/IMU dead reckoning
+    T_world_rover_onboard: np.ndarray  # (4, 4) VO-corrected: the frame the points and rocks are in
+    driven_m: float  # odometry distance since the previous site
+    sensor_xyz_m: np.ndarray  # navcam position (mean of the left cameras) in the onboard frame
+    rocks: list[ExtractedRock]
+    n_points: int
+    timings_s: dict[str, float] = field(default_factory=dict)
+    points: np.ndarray | None = None  # (N, 3) onboard frame, kept only with keep_points
+
+    def site_rocks(self) -> SiteRocks:
+        return SiteRocks(self.rocks, self.sensor_xyz_m)
+
+    def estimated_to_true(self) -> np.ndarray:
+        """4x4 map of this site's onboard (estimated) world frame onto the true world (evaluation only)."""
+        return self.T_world_rover_true @ np.linalg.inv(self.T_world_rover_onboard)
+
+
+class RockSiteSurvey:
+    """Drive a scenario's sites and take a stereo panorama at each (see the module docstring).
+
+    ``progress(message)`` is called at every site and pan step. Close it (or use it as a context manager) to free
+    the renderers' GL contexts.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        config: SurveyConfig = SurveyConfig(),
+        progress: Callable[[str], None] | None = None,
+        keep_points: bool = False,
+    ) -> None:
+        from rover_sim.render import ImageNoise, RenderConfig, StereoRenderer
+
+        self.sc = scenario
+        self.config = config
+        self.progress = progress or (lambda _msg: None)
+        self.keep_points = keep_points
+        t0 = time.perf_counter()
+        self.mission = Mission(scenario)
+        noise = ImageNoise(seed=scenario.seed + 1) if config.image_noise else None
+        self.renderer = StereoRenderer(
+            self.mission.sim,
+            RenderConfig(
+                resolution_px=config.resolution_px,
+                noise=noise,
+                shadows=config.shadows and scenario.sun.shadows,
+                shadow_half_extent_m=config.shadow_half_extent_m,
+            ),
+        )
+        self.build_s = time.perf_counter() - t0
+        self.sites: list[SiteSurvey] = []
+        self._last_distance_m = 0.0
+
+    @property
+    def terrain(self) -> Terrain:
+        return self.mission.terrain
+
+    def close(self) -> None:
+        self.renderer.close()
+        self.mission.renderer.close()
+        self.mission.sensors.detach()
+
+    def __enter__(self) -> RockSiteSurvey:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ the mission
+    def run(self, max_sites: int | None = None) -> list[SiteSurvey]:
+        """Survey the start site, then drive each ``goto`` and survey its end; returns the sites."""
+        m = self.mission
+        m._tick(m.sim)
+        if m.vo is not None:
+            m._vo_update()  # the first pair initialises VO
+        self.survey_site()
+        for cmd in self.sc.commands:
+            if max_sites is not None and len(self.sites) >= max_sites:
+                break
+            t0 = time.perf_counter()
+            m._run_command(cmd)
+            if isinstance(cmd, GotoCmd):
+                self.progress(f"drove to site {len(self.sites)} in {time.perf_counter() - t0:.0f} s")
+                self.survey_site(drive_s=time.perf_counter() - t0)
+        return self.sites
+
+    def survey_site(self, drive_s: float = 0.0) -> SiteSurvey:
+        """Panorama at the current stop: points through the onboard pose, then rock extraction."""
+        m, cfg = self.mission, self.config
+        timings = {"drive": drive_s, "render": 0.0, "stereo": 0.0}
+        sim = m.sim
+        T_onboard = m.onboard.pose.as_matrix()  # the panorama is mapped through this estimate
+        T_dr = m.dr.pose.as_matrix()
+        T_true = np.eye(4)  # evaluation only
+        T_true[:3, :3] = quat_wxyz_to_R(sim.quat_wxyz())
+        T_true[:3, 3] = sim.position_m()
+        clouds, sensors = [], []
+        for elevation in cfg.elevations_deg:
+            for pan in self._pans():
+                self._point_mast(pan, elevation)
+                t0 = time.perf_counter()
+                frame = self.renderer.render_pair("navcam")
+                t1 = time.perf_counter()
+                pts = panorama_points(frame.left, frame.right, frame.rig, cfg.stereo)
+                timings["render"] += t1 - t0
+                timings["stereo"] += time.perf_counter() - t1
+                body = (np.abs(pts[:, 0]) < ROVER_BOX_HALF_M[0]) & (np.abs(pts[:, 1]) < ROVER_BOX_HALF_M[1])
+                pts = pts[~body]
+                clouds.append(voxel_downsample(pts @ T_onboard[:3, :3].T + T_onboard[:3, 3], cfg.voxel_m))
+                sensors.append(T_onboard[:3, :3] @ frame.rig.left.T_rover_cam[:3, 3] + T_onboard[:3, 3])
+                self.progress(f"site {len(self.sites)}: pan {pan:+.0f} deg, {len(pts)} points")
+        self._point_mast(self.sc.nav.mast_pan_deg, self.sc.nav.mast_tilt_deg)  # back to the navigation pointing
+        sensor = np.mean(sensors, axis=0)
+        t0 = time.perf_counter()
+        cloud = np.concatenate(clouds)
+        horiz = np.hypot(cloud[:, 0] - sensor[0], cloud[:, 1] - sensor[1])
+        cloud = voxel_downsample(cloud[horiz <= cfg.max_range_m], cfg.voxel_m)
+        rocks = extract_rocks(cloud, cfg.rocks, sensor_xyz=sensor)
+        timings["extract"] = time.perf_counter() - t0
+        site = SiteSurvey(
+            index=len(self.sites),
+            t_s=sim.time_s,
+            T_world_rover_true=T_true,
+            T_world_rover_dr=T_dr,
+            T_world_rover_onboard=T_onboard,
+            driven_m=m.onboard.distance_m - self._last_distance_m,
+            sensor_xyz_m=sensor,
+            rocks=rocks,
+            n_points=len(cloud),
+            timings_s=timings,
+            points=cloud if self.keep_points else None,
+        )
+        self._last_distance_m = m.onboard.distance_m
+        self.sites.append(site)
+        self.progress(f"site {site.index}: {len(rocks)} rocks from {len(cloud)} points")
+        return site
+
+    def _pans(self) -> list[float]:
+        n = max(1, int(round(360.0 / self.config.pan_step_deg)))
+        step = 360.0 / n
+        return [-180.0 + step * (k + 0.5) for k in range(n)]
+
+    def _point_mast(self, pan_deg: float, elevation_deg: float) -> None:
+        """Point the navcams (elevation: up positive; the tilt joint is its negative) and let the mast settle."""
+        m = self.mission
+        m.sim.set_mast(math.radians(pan_deg), -math.radians(elevation_deg))
+        for _ in range(int(round(MAST_SETTLE_S / TICK_S))):
+            m.sim.step(None, int(round(TICK_S / m.sim.timestep_s)))
+            m._tick(m.sim)
+
+
+# ================================================================================================================
+# Chain of sites
+# ================================================================================================================
+
+
+def adjust_chain(sites: list[SiteSurvey], params: ChainParams = ChainParams()) -> SiteChain:
+    """Feed the sites, in order, to an incremental :class:`nav.rocks.SiteChain` (onboard estimates only)."""
+    chain = SiteChain(params)
+    for s in sites:
+        chain.add_site(s.site_rocks(), s.T_world_rover_onboard[:3, 3], s.driven_m)
+    return chain
+
+
+# ================================================================================================================
+# Evaluation against the terrain's rock list (ground truth)
+# ================================================================================================================
+
+ASSOCIATION_MARGIN_M = 0.3  # an extracted rock is a generated one if within its footprint radius plus this ...
+ASSOCIATION_RANGE_FRAC = 0.02  # ... plus this fraction of the range (stereo range error grows with range)
+
+
+@dataclass(frozen=True)
+class ExtractionEval:
+    """Counts and per-rock figures of one site (or of several, summed)."""
+
+    n_true: int  # generated rocks taller than min_height_m within max_range_m
+    n_found: int  # ... of them associated with an extracted rock
+    n_extracted: int  # extracted rocks within max_range_m
+    n_correct: int  # ... of them associated with a generated rock (any height)
+    rms_m: list[float]  # model RMS of the extracted rocks associated with rocks taller than min_height_m
+    type_match: list[bool]  # chosen model type == generating shape, same rocks
+    range_m: list[float]  # their range
+    missed: list[tuple[str, float, float]]  # (shape, height, range) of the generated rocks not found
+
+    @property
+    def recall(self) -> float:
+        return self.n_found / self.n_true if self.n_true else math.nan
+
+    @property
+    def precision(self) -> float:
+        return self.n_correct / self.n_extracted if self.n_extracted else math.nan
+
+    def __add__(self, other: ExtractionEval) -> ExtractionEval:
+        return ExtractionEval(
+            self.n_true + other.n_true,
+            self.n_found + other.n_found,
+            self.n_extracted + other.n_extracted,
+            self.n_correct + other.n_correct,
+            self.rms_m + other.rms_m,
+            self.type_match + other.type_match,
+            self.range_m + other.range_m,
+            self.missed + other.missed,
+        )
+
+
+def rocks_in_true_frame(site: SiteSurvey) -> np.ndarray:
+    """(N, 3) extracted rock base centres mapped into the true world (evaluation only)."""
+    W = site.estimated_to_true()
+    c = np.array([r.model.centre_xyz_m for r in site.rocks]).reshape(-1, 3)
+    return c @ W[:3, :3].T + W[:3, 3]
+
+
+def associate(site: SiteSurvey, truth: list[Rock]) -> np.ndarray:
+    """Index into ``truth`` of each extracted rock of ``site`` (-1: none), one-to-one, nearest first.
+
+    Gate: the generated rock's footprint radius plus ``ASSOCIATION_MARGIN_M`` plus ``ASSOCIATION_RANGE_FRAC`` of the
+    range from the site (horizontal distances between model centre and rock centre, in the true frame).
+    """
+    out = np.full(len(site.rocks), -1, dtype=int)
+    if not site.rocks or not truth:
+        return out
+    est = rocks_in_true_frame(site)[:, :2]
+    txy = np.array([[r.x_m, r.y_m] for r in truth])
+    cam = site.T_world_rover_true[:2, 3]
+    dist = np.linalg.norm(est[:, None, :] - txy[None, :, :], axis=2)
+    gate = (
+        np.array([r.footprint_radius_m for r in truth])[None, :]
+        + ASSOCIATION_MARGIN_M
+        + ASSOCIATION_RANGE_FRAC * np.linalg.norm(est - cam, axis=1)[:, None]
+    )
+    cost = np.where(dist <= gate, dist, 1e6)
+    rows, cols = linear_sum_assignment(cost)
+    ok = cost[rows, cols] < 1e6
+    out[rows[ok]] = cols[ok]
+    return out
+
+
+def evaluate_extraction(
+    site: SiteSurvey, terrain: Terrain, max_range_m: float = 30.0, min_height_m: float = 0.2
+) -> ExtractionEval:
+    """Recall (generated rocks taller than ``min_height_m`` within ``max_range_m`` of the site), precision
+    (extracted rocks within ``max_range_m`` that are a generated rock), model RMS and type agreement."""
+    truth = terrain.rocks
+    idx = associate(site, truth)
+    cam = site.T_world_rover_true[:2, 3]
+    t_range = np.array([math.hypot(r.x_m - cam[0], r.y_m - cam[1]) for r in truth])
+    target = (t_range <= max_range_m) & np.array([r.height_m > min_height_m for r in truth])
+    found_set = {int(i) for i in idx if i >= 0}
+    est = rocks_in_true_frame(site)
+    e_range = np.linalg.norm(est[:, :2] - cam, axis=1) if len(est) else np.zeros(0)
+    in_range = e_range <= max_range_m
+    rms, types, ranges = [], [], []
+    for k, i in enumerate(idx):
+        if i >= 0 and target[i]:
+            rms.append(site.rocks[k].model.rms_m)
+            types.append(site.rocks[k].model.shape == truth[i].shape)
+            ranges.append(float(t_range[i]))
+    missed = [
+        (truth[i].shape, truth[i].height_m, float(t_range[i]))
+        for i in np.flatnonzero(target)
+        if int(i) not in found_set
+    ]
+    return ExtractionEval(
+        n_true=int(target.sum()),
+        n_found=int(sum(1 for i in np.flatnonzero(target) if int(i) in found_set)),
+        n_extracted=int(in_range.sum()),
+        n_correct=int(np.sum(in_range & (idx >= 0))),
+        rms_m=rms,
+        type_match=types,
+        range_m=ranges,
+        missed=missed,
+    )
+
+
+@dataclass(frozen=True)
+class MatchEval:
+    """One site pair: matches, how many are the same generated rock, and the site-to-site position error."""
+
+    site_a: int
+    site_b: int
+    separation_m: float  # true horizontal distance between the two sites
+    n_matches: int
+    n_correct: int
+    position_error_m: float  # |b's position from a's truth and the rock transform - b's true position|
+    odometry_error_m: float  # the same from the onboard estimates alone
+
+    @property
+    def error_pct(self) -> float:
+        return 100.0 * self.position_error_m / self.separation_m
+
+
+def evaluate_match(a: SiteSurvey, b: SiteSurvey, match: SiteMatch, terrain: Terrain) -> MatchEval:
+    """Correct matches (both rocks associated with the same generated rock) and the site-to-site error.
+
+    The match maps b's estimated frame into a's; a's estimated frame maps onto the true world by the truth, so
+    b's position through a's truth and the match is compared with b's true position.
+    """
+    ia, ib = associate(a, terrain.rocks), associate(b, terrain.rocks)
+    correct = sum(1 for i, j in match.pairs if ia[i] >= 0 and ia[i] == ib[j])
+    Wa = a.estimated_to_true()
+    eb = b.T_world_rover_onboard[:3, 3]
+    via_rocks = match.transform.apply(eb[None])[0]
+    true_b = b.T_world_rover_true[:3, 3]
+    pos = Wa[:3, :3] @ via_rocks + Wa[:3, 3]
+    odo = Wa[:3, :3] @ eb + Wa[:3, 3]
+    sep = float(np.linalg.norm(true_b[:2] - a.T_world_rover_true[:2, 3]))
+    return MatchEval(
+        a.index,
+        b.index,
+        sep,
+        len(match.pairs),
+        correct,
+        float(np.linalg.norm(pos - true_b)),
+        float(np.linalg.norm(odo - true_b)),
+    )
+
+
+@dataclass(frozen=True)
+class ChainEval:
+    """Position errors (m) of every site: dead reckoning, VO (onboard), adjusted (final and at addition)."""
+
+    dead_reckoning: np.ndarray
+    vo: np.ndarray
+    adjusted: np.ndarray
+    adjusted_incremental: np.ndarray
+
+
+def evaluate_chain(sites: list[SiteSurvey], chain: SiteChain) -> ChainEval:
+    truth = np.array([s.T_world_rover_true[:3, 3] for s in sites])
+    dr = np.array([s.T_world_rover_dr[:3, 3] for s in sites])
+    vo = np.array([s.T_world_rover_onboard[:3, 3] for s in sites])
+    adj = np.array([c.adjusted_xyz_m for c in chain.sites])
+    inc = np.array([c.at_addition for c in chain.sites])
+
+    def err(p: np.ndarray) -> np.ndarray:
+        return np.linalg.norm(p - truth, axis=1)
+
+    return ChainEval(err(dr), err(vo), err(adj), err(inc))
+
+
+def correction_to_truth(site: SiteSurvey) -> Pose4:
+    """The :class:`Pose4` part (yaw, translation) of :meth:`SiteSurvey.estimated_to_true` (evaluation only)."""
+    W = site.estimated_to_true()
+    return Pose4(W[:3, 3].copy(), math.atan2(W[1, 0], W[0, 0]))
