@@ -94,6 +94,25 @@ def bench_sweep_cmd(json: JsonOpt = None) -> None:
         raise typer.Exit(code=1)
 
 
+@bench_app.command("rocks")
+def bench_rocks_cmd(json: JsonOpt = None) -> None:
+    """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO."""
+    from rover_sim.bench.rocks import bench_rocks
+
+    r = bench_rocks(str(json) if json else None)
+    c = r["chain_error_m"]
+    ok = (
+        r["recall"] >= 0.9
+        and r["precision"] >= 0.9
+        and r["median_rms_m"] <= 0.04
+        and r["match_correct_frac"] >= 0.9
+        and r["site_error_pct"] <= 2.0
+        and c["adjusted"] < min(c["dead_reckoning"], c["vo"])
+    )
+    if not ok:
+        raise typer.Exit(code=1)
+
+
 @app.command("render")
 def render_cmd(
     scenario: Annotated[str, typer.Argument(help="Scenario whose terrain, sun and start pose to use.")],
