@@ -1276,11 +1276,12 @@ class SiteChain:
             return
         P = self.params
         tracks = self.tracks()
+        positions = [site.rocks.positions for site in self.sites]
         obs_s, obs_t, q, u, Wh = [], [], [], [], []
         for t, track in enumerate(tracks):
             for s, r in track:
                 site = self.sites[s]
-                p = site.rocks.positions[r]
+                p = positions[s][r]
                 los = p - site.rocks.sensor_xyz_m
                 cov = tie_point_covariances(p[None], site.rocks.sensor_xyz_m, P.match)[0]
                 obs_s.append(s)
@@ -1295,7 +1296,7 @@ class SiteChain:
         r_a = np.linalg.norm((q_a - np.array([self.sites[s].rocks.sensor_xyz_m for s in obs_s]).reshape(-1, 3))[:, :2],
                              axis=1)  # fmt: skip
         Wh_a = np.array(Wh).reshape(-1, 3, 3)
-        l0 = [self.sites[s].correction.apply(self.sites[s].rocks.positions[r][None])[0] for s, r in
+        l0 = [self.sites[s].correction.apply(positions[s][r][None])[0] for s, r in
               (track[0] for track in tracks)]  # fmt: skip
         corrections = np.concatenate([self.sites[s].correction.as_vector() for s in range(1, n)])
         x0 = np.concatenate([corrections, np.ravel(l0), np.zeros(n_bias)])
