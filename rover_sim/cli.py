@@ -268,6 +268,23 @@ def sweep_cmd(
         raise typer.Exit(code=1)
 
 
+@app.command("stereo")
+def stereo_command(
+    left: Annotated[Path, typer.Argument(help="Left rectified greyscale image (PNG).")],
+    right: Annotated[Path, typer.Argument(help="Right rectified greyscale image (PNG).")],
+    num_disparities: Annotated[int, typer.Option("--num-disparities", help="Search range, multiple of 16.")] = 64,
+    out: Annotated[Path, typer.Option("--out", help="Output .npy (float32, NaN = no match).")] = Path("disparity.npy"),
+    window_px: Annotated[int, typer.Option("--window", help="SAD window side (odd).")] = 9,
+) -> None:
+    """MER SAD stereo on any rectified greyscale pair; writes float32 disparity."""
+    from rover_sim.stereo_cli import stereo_cmd
+
+    try:
+        stereo_cmd(left, right, num_disparities, out, window_px)
+    except RoverSimError as e:
+        _fail(e)
+
+
 def main() -> None:  # pragma: no cover - console entry point
     app()
 

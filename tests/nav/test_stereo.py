@@ -13,17 +13,24 @@ from hypothesis import strategies as st
 from nav.camera import PinholeCamera, StereoRig, transform_points
 from nav.geometry import se3
 from nav.stereo import (
+    RowWindow,
     StereoParams,
     bandpass,
     compute_disparity,
+    discontinuity_mask,
     disparity_to_xyz_cam,
+    edge_mask,
     left_right_mask,
+    match_quality_mask,
     quantise,
     range_image,
+    row_search_window,
     sad_search,
     speckle_mask,
     stereobm_baseline,
     subpixel_quadratic,
+    texture_mask,
+    uniqueness_mask,
     xyz_cam_to_rover,
 )
 
@@ -153,53 +160,84 @@ def stereo_scene_disparity(stereo_scene: SynthPair) -> np.ndarray:
 # --------------------------------------------------------------------------------------------------------------
 
 
-def brute_force_sad(left_q: np.ndarray, right_q: np.ndarray, params: StereoParams) -> np.ndarray:
-    """(D, H, W) window SADs, inf where the window leaves either image."""
+def brute_force_sad(
+    left_q: np.ndarray, right_q: np.ndarray, params: StereoParams, searched: np.ndarray | None = None
+) -> np.ndarray:
+    """(D, H, W) window SADs, inf where not searched. The window is clipped at the top, bottom and right image
+    borders and must lie inside the right image on the left; ``searched`` (D, H) bool limits the disparities of each
+    row (default: all)."""
     h_px, w_px = left_q.shape
     hw = params.half_window_px
     L, R = left_q.astype(np.int64), right_q.astype(np.int64)
     vol = np.full((params.num_disparities, h_px, w_px), np.inf)
     for i in range(params.num_disparities):
         s = params.min_disparity + i
-        for v in range(hw, h_px - hw):
-            for u in range(s + hw, w_px - hw):
-                a = L[v - hw : v + hw + 1, u - hw : u + hw + 1]
-                b = R[v - hw : v + hw + 1, u - s - hw : u - s + hw + 1]
-                vol[i, v, u] = np.abs(a - b).sum()
+        for v in range(h_px):
+            if searched is not None and not searched[i, v]:
+                continue
+            v0, v1 = max(v - hw, 0), min(v + hw + 1, h_px)
+            for u in range(s + hw, w_px):
+                u1 = min(u + hw + 1, w_px)
+                vol[i, v, u] = np.abs(L[v0:v1, u - hw : u1] - R[v0:v1, u - hw - s : u1 - s]).sum()
     return vol
 
 
-def test_sad_search_equals_brute_force() -> None:
-    rng = np.random.default_rng(0)
-    params = StereoParams(num_disparities=16, min_disparity=2, window_px=5)
-    left_q = rng.integers(0, 63, (14, 40), dtype=np.uint8)
-    right_q = np.roll(left_q, -5, axis=1)
-    right_q[:, -8:] = rng.integers(0, 63, (14, 8), dtype=np.uint8)
-    vol = brute_force_sad(left_q, right_q, params)
-    res = sad_search(left_q, right_q, params)
+def check_search_against(res, vol: np.ndarray, params: StereoParams) -> None:
+    """Winner, its neighbours' scores, the best far score and the right winners of ``res`` agree with ``vol``."""
+    n_disp, h_px, w_px = vol.shape
     matched = np.isfinite(vol).any(axis=0)
     idx = np.where(matched, np.argmin(np.where(np.isfinite(vol), vol, 1e9), axis=0), -1)
     np.testing.assert_array_equal(res.index, idx)
     v, u = np.nonzero(matched)
     i = idx[v, u]
     np.testing.assert_array_equal(res.cost[v, u], vol[i, v, u])
-    inner = (i > 0) & (i < params.num_disparities - 1) & np.isfinite(vol[np.minimum(i + 1, 15), v, u])
-    np.testing.assert_array_equal(res.cost_minus[v, u][inner], vol[i - 1, v, u][inner])
-    np.testing.assert_array_equal(res.cost_plus[v, u][inner], vol[i + 1, v, u][inner])
+    ok = edge_mask(res)[v, u]
+    assert ok.sum() > 0.5 * ok.size
+    below, above = vol[np.maximum(i - 1, 0), v, u], vol[np.minimum(i + 1, n_disp - 1), v, u]
+    np.testing.assert_array_equal(res.cost_minus[v, u][ok], below[ok])
+    np.testing.assert_array_equal(res.cost_plus[v, u][ok], above[ok])
+    inner = (i > 0) & (i < n_disp - 1) & np.isfinite(below) & np.isfinite(above)  # both neighbours searched
+    inner &= (i > res.window.lo[v]) & (i < res.window.hi[v])
+    np.testing.assert_array_equal(ok, inner)
     # uniqueness: best score more than 1 px from the winner
-    far = np.abs(np.arange(params.num_disparities)[:, None] - i[None, :]) >= 2
+    far = np.abs(np.arange(n_disp)[:, None] - i[None, :]) >= 2
     second = np.where(far, vol[:, v, u], np.inf).min(axis=0)
     has_second = np.isfinite(second)
     np.testing.assert_array_equal(res.second_cost[v, u][has_second], second[has_second])
     # right-referenced winner: argmin over the left pixels u_right + s
-    for vr in range(2, 12):
-        for ur in range(2, 40 - 2 - params.min_disparity):
+    for vr in range(h_px):
+        for ur in range(w_px):
             scores = [
-                vol[k, vr, ur + params.min_disparity + k] if ur + params.min_disparity + k < 40 else np.inf
-                for k in range(16)
+                vol[k, vr, ur + params.min_disparity + k] if ur + params.min_disparity + k < w_px else np.inf
+                for k in range(n_disp)
             ]
             expected = int(np.argmin(scores)) if np.isfinite(scores).any() else -1
             assert res.right_index[vr, ur] == expected
+
+
+def random_search_pair(seed: int, shape: tuple[int, int] = (14, 40)) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    left_q = rng.integers(0, 63, shape, dtype=np.uint8)
+    right_q = np.roll(left_q, -5, axis=1)
+    right_q[:, -8:] = rng.integers(0, 63, (shape[0], 8), dtype=np.uint8)
+    return left_q, right_q
+
+
+def test_sad_search_equals_brute_force() -> None:
+    params = StereoParams(num_disparities=16, min_disparity=2, window_px=5)
+    left_q, right_q = random_search_pair(0)
+    check_search_against(sad_search(left_q, right_q, params), brute_force_sad(left_q, right_q, params), params)
+
+
+def test_sad_search_in_row_windows_equals_brute_force() -> None:
+    """Each row searches only its window (monotone windows: each disparity is searched on one band of rows)."""
+    params = StereoParams(num_disparities=16, min_disparity=2, window_px=5)
+    left_q, right_q = random_search_pair(1)
+    lo = np.array([0, 0, 1, 1, 2, 2, 2, 3, 4, 4, 5, 6, 6, 7], np.int32)
+    hi = np.array([4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 15, 15], np.int32)
+    searched = (np.arange(16)[:, None] >= lo[None, :]) & (np.arange(16)[:, None] <= hi[None, :])
+    res = sad_search(left_q, right_q, params, RowWindow(lo, hi))
+    check_search_against(res, brute_force_sad(left_q, right_q, params, searched), params)
 
 
 def test_workspace_reuse_is_stateless(stereo_scene: SynthPair, stereo_scene_disparity: np.ndarray) -> None:
@@ -287,6 +325,15 @@ def test_quadratic_subpixel_recovers_a_known_fractional_shift(fraction: float) -
         assert abs(np.median(est) - 20.0) > 0.1 and abs(np.median(est) - 21.0) > 0.1  # not integer-locked
 
 
+def test_min_disparity_offsets_the_search() -> None:
+    left, right = fronto_parallel_pair(seed=6, disparity_px=30.4)
+    d = compute_disparity(left, right, StereoParams(min_disparity=16, num_disparities=32))
+    assert np.median(d[np.isfinite(d)]) == pytest.approx(30.4, abs=0.1)
+    assert np.isfinite(d).mean() > 0.8
+    too_far = compute_disparity(left, right, StereoParams(min_disparity=32, num_disparities=16))
+    assert np.isfinite(too_far).mean() < 0.02  # the true disparity lies outside the search range
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Texture, uniqueness and blob checks
 # --------------------------------------------------------------------------------------------------------------
@@ -319,10 +366,14 @@ def test_uniqueness_rejects_repetitive_texture() -> None:
     tex = np.repeat(row[None, :], SIZE_PX, axis=0)
     u8 = lambda a: np.clip(np.rint(a + rng.normal(0, 0.7, a.shape)), 0, 255).astype(np.uint8)  # noqa: E731
     left, right = u8(tex[:, :SIZE_PX]), u8(tex[:, 20 : 20 + SIZE_PX])  # true disparity 20 (or 12, 28, ...)
-    strict = compute_disparity(left, right, StereoParams(speckle_window_size=0))
-    lax = compute_disparity(left, right, StereoParams(uniqueness_ratio=0.0, speckle_window_size=0))
+    # the full-range search without the other checks that also catch some of these matches
+    alone = {"speckle_window_size": 0, "discontinuity_px": 0.0, "row_window": False}
+    strict = compute_disparity(left, right, StereoParams(**alone))
+    lax = compute_disparity(left, right, StereoParams(uniqueness_ratio=0.0, **alone))
     assert np.isfinite(strict).mean() < 0.05
     assert np.isfinite(lax).mean() > 0.15  # the other checks alone let many of these through
+    # with row windows, the half-resolution search applies the test over the whole range first
+    assert np.isfinite(compute_disparity(left, right)).mean() < 0.05
 
 
 def test_speckle_mask_removes_small_islands_only() -> None:
@@ -332,6 +383,82 @@ def test_speckle_mask_removes_small_islands_only() -> None:
     d[20, 10] = 14.0  # a single outlier inside the blob
     keep = speckle_mask(d, StereoParams(speckle_window_size=40, speckle_range_px=1.0))
     assert keep[6, 6] and not keep[11, 41] and not keep[20, 10]
+
+
+def test_discontinuity_mask_drops_both_sides_of_a_depth_edge() -> None:
+    v = np.arange(120, dtype=np.float32)[:, None]
+    d = np.repeat(10.0 + 0.15 * v, 120, axis=1).astype(np.float32)  # ground: 0.15 px per row, kept
+    d[40:80, 40:80] += 4.0  # a rock
+    d[5, 5] = np.nan
+    keep = discontinuity_mask(d, StereoParams(window_px=9, discontinuity_px=1.5))
+    assert keep[10:30].all() and keep[90:110, :30].all() and keep[55:65, 50:70].all()
+    assert not keep[55:65, 36:40].any() and not keep[55:65, 40:44].any()  # the ground and the rock at its edge
+    assert not keep[36:40, 55:65].any() and not keep[76:80, 55:65].any()
+    assert not keep[5, 5] and keep[5, 7]  # NaN stays invalid and does not cut its neighbours
+    off = discontinuity_mask(d, StereoParams(discontinuity_px=0.0))
+    np.testing.assert_array_equal(off, np.isfinite(d))
+
+
+def test_match_quality_rejects_a_search_that_misses_the_true_disparity() -> None:
+    """A row window that misses the surface still has a best match; the checks must not keep it."""
+    left, right = fronto_parallel_pair(seed=5, disparity_px=20.3)
+    params = StereoParams()
+    bp_l, bp_r = bandpass(left, params), bandpass(right, params)
+    q_l, q_r = quantise(bp_l, params), quantise(bp_r, params)
+    rows = np.ones(SIZE_PX, np.int32)
+    right_window = sad_search(q_l, q_r, params, RowWindow(14 * rows, 26 * rows))
+    searched = edge_mask(right_window)
+    assert match_quality_mask(right_window, bp_l, params)[searched].mean() > 0.98
+    wrong_window = sad_search(q_l, q_r, params, RowWindow(0 * rows, 12 * rows))
+    searched = edge_mask(wrong_window)
+    good = match_quality_mask(wrong_window, bp_l, params)
+    assert good[searched].mean() < 0.4
+    # confined to the window, left-right and uniqueness pass most of the wrong matches; all the checks together
+    # keep a few per cent
+    lr = left_right_mask(wrong_window.index, wrong_window.right_index, params.lr_max_diff_px)
+    uq = uniqueness_mask(wrong_window, params)
+    assert (lr & uq)[searched].mean() > 0.4
+    with np.errstate(invalid="ignore"):
+        d = wrong_window.index + subpixel_quadratic(wrong_window.cost_minus, wrong_window.cost, wrong_window.cost_plus)
+    d = np.where(searched & good & lr & uq & texture_mask(bp_l, params), d, np.nan).astype(np.float32)
+    d[~discontinuity_mask(d, params)] = np.nan
+    d[~speckle_mask(d, params)] = np.nan
+    assert np.isfinite(d).mean() < 0.05
+
+
+def test_row_windows_contain_the_surfaces_and_skip_featureless_rows(stereo_scene: SynthPair) -> None:
+    params = StereoParams()
+    left, right = stereo_scene.left.copy(), stereo_scene.right.copy()
+    left[:30], right[:30] = 120, 120  # a featureless band (sky)
+    window = row_search_window(bandpass(left, params), bandpass(right, params), params)
+    assert (window.hi[:10] < window.lo[:10]).all()  # not searched (the coarse window reaches ~20 px down)
+    v, u = np.nonzero(stereo_scene.smooth[40:])
+    v += 40
+    index = np.rint(stereo_scene.disparity_px[v, u]).astype(int) - params.min_disparity
+    inside = (window.lo[v] < index) & (index < window.hi[v])  # the winner and both its neighbours
+    assert inside.mean() > 0.99
+    width = window.hi - window.lo + 1
+    assert (width[np.r_[40:56, 236:256]] <= 10).all()  # ground-only rows: a fraction of the 64 disparities
+
+
+def test_pipeline_is_the_composition_of_the_steps(stereo_scene: SynthPair, stereo_scene_disparity: np.ndarray) -> None:
+    """compute_disparity (buffers, fused OpenCV calls) equals the public step functions applied in order."""
+    params = StereoParams()
+    bp_l, bp_r = bandpass(stereo_scene.left, params), bandpass(stereo_scene.right, params)
+    window = row_search_window(bp_l, bp_r, params)
+    search = sad_search(quantise(bp_l, params), quantise(bp_r, params), params, window)
+    with np.errstate(invalid="ignore"):
+        d = params.min_disparity + search.index + subpixel_quadratic(search.cost_minus, search.cost, search.cost_plus)
+    ok = edge_mask(search) & texture_mask(bp_l, params) & match_quality_mask(search, bp_l, params)
+    ok &= uniqueness_mask(search, params) & left_right_mask(search.index, search.right_index, params.lr_max_diff_px)
+    d = np.where(ok, d, np.nan).astype(np.float32)
+    d[~discontinuity_mask(d, params)] = np.nan
+    d[~speckle_mask(d, params)] = np.nan
+    got = stereo_scene_disparity
+    assert (np.isnan(got) != np.isnan(d)).mean() < 1e-4  # a 1/16 px rounding may differ at a threshold
+    both = np.isfinite(got) & np.isfinite(d)
+    assert both.mean() > 0.75
+    np.testing.assert_allclose(got[both], d[both], atol=1e-4)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -401,6 +528,9 @@ def test_quantise_cancels_camera_gain() -> None:
         {"min_disparity": -1},
         {"bandpass_sigma_fine_px": 4.0},
         {"uniqueness_ratio": -0.1},
+        {"discontinuity_px": -1.0},
+        {"max_sad_ratio": -0.5},
+        {"row_window_margin_px": 0},
     ],
 )
 def test_bad_parameters_raise(kwargs: dict) -> None:
@@ -413,3 +543,5 @@ def test_bad_images_raise() -> None:
         compute_disparity(np.zeros((8, 8), np.uint8), np.zeros((8, 9), np.uint8))
     with pytest.raises(ValueError):
         compute_disparity(np.zeros((8, 8), np.float32), np.zeros((8, 8), np.float32))
+    with pytest.raises(ValueError, match="bin it"):
+        compute_disparity(np.zeros((1024, 1024), np.uint8), np.zeros((1024, 1024), np.uint8))
