@@ -25,8 +25,15 @@ if TYPE_CHECKING:
     from rover_sim.scenario import AutonavCmd
 
 HAZCAM = "hazcam_front"
+REAR_HAZCAM = "hazcam_rear"  # imaged too while the rover is backing up (it does not otherwise look behind)
 MAX_BACKTRACKS = 12  # retraced steps allowed per autonav command before giving up
-MAX_RANGE_M = 6.0  # hazcam look-ahead on MER: 3-4 m useful; farther points are too coarse to keep
+# Hazcam look-ahead on MER: 3-4 m useful. At 256^2 (10 cm baseline) the disparity at 3.5 m is ~2 px and
+# elevation errors there reach 10-20 cm, as big as the steps GESTALT must see; farther points only add false rocks.
+MAX_RANGE_M = 3.5
+# The rover's own wheels are in the hazcams' view (front wheels, more so when steered): points inside the rover's
+# plan-view box (rover frame, |x| and |y| below these) are the vehicle, not terrain.
+SELF_MASK_HALF_LENGTH_M = 0.85
+SELF_MASK_HALF_WIDTH_M = 0.8
 
 
 @dataclass
@@ -56,6 +63,17 @@ def reverse_of(prim: Primitive) -> Primitive:
     return Straight(-prim.distance_m)
 
 
+def terrain_points(points_rover: np.ndarray) -> np.ndarray:
+    """Range points worth mapping: within ``MAX_RANGE_M`` and outside the rover's own plan-view box."""
+    xy = points_rover[:, :2]
+    own = (np.abs(xy[:, 0]) < SELF_MASK_HALF_LENGTH_M) & (np.abs(xy[:, 1]) < SELF_MASK_HALF_WIDTH_M)
+    return points_rover[(np.hypot(xy[:, 0], xy[:, 1]) < MAX_RANGE_M) & ~own]
+
+
+def _drives_backward(prim: Primitive) -> bool:
+    return isinstance(prim, Straight | Arc) and prim.distance_m < 0
+
+
 def _heading(R: np.ndarray) -> float:
     return float(math.atan2(R[1, 0], R[0, 0]))
 
@@ -66,9 +84,11 @@ def run_autonav(mission: Mission, cmd: AutonavCmd, params: GestaltParams | None 
     stats = AutonavStats()
     mission.autonav_stats = stats
     rig = mission.renderer.rig(HAZCAM)  # body-fixed, calibrated once
+    rear_rig = mission.renderer.rig(REAR_HAZCAM)
     mission.rec.log_camera(HAZCAM, rig, mission.sim.time_s)
     goal = np.array([cmd.x_m, cmd.y_m])
     history: list[Primitive] = []
+    backing = False  # the last drive was backward: look behind as well
     for _ in range(cmd.max_cycles):
         pose = mission.onboard.pose
         if np.linalg.norm(goal - pose.position_xyz_m[:2]) <= cmd.tolerance_m:
@@ -76,10 +96,12 @@ def run_autonav(mission: Mission, cmd: AutonavCmd, params: GestaltParams | None 
             mission._event(f"autonav: {stats.outcome}")
             return stats
         frame = mission.renderer.render_pair(HAZCAM)
+        rear = mission.renderer.render_pair(REAR_HAZCAM) if backing else None
         t0 = time.perf_counter()
         ri = range_image(frame.left, frame.right, rig, stereo)
-        pts = ri.points_rover_m()
-        pts = pts[np.linalg.norm(pts[:, :2], axis=1) < MAX_RANGE_M]
+        pts = terrain_points(ri.points_rover_m())
+        if rear is not None:
+            pts = np.vstack([pts, terrain_points(range_image(rear.left, rear.right, rear_rig, stereo).points_rover_m())])
         T = pose.as_matrix()
         pts_world = transform_points(T, pts)
         yaw = _heading(T[:3, :3])
@@ -97,13 +119,17 @@ def run_autonav(mission: Mission, cmd: AutonavCmd, params: GestaltParams | None 
                 return stats
             stats.backtracks += 1
             mission._event(f"autonav cycle {stats.cycles}: no safe arc, backtracking", "WARN")
-            mission._primitive(reverse_of(history.pop()))
+            back = reverse_of(history.pop())
+            mission._primitive(back)
+            backing = _drives_backward(back)
             continue
         mission._event(f"autonav cycle {stats.cycles}: {decision.reason}")
         dist = float(np.linalg.norm(goal - T[:2, 3]))
-        prim = primitive_for(decision.arc, min(cmd.step_m, max(dist, 0.35)))
+        step = decision.drive_m if decision.drive_m is not None else min(cmd.step_m, max(dist, 0.35))
+        prim = primitive_for(decision.arc, step)
         mission._primitive(prim)
         history.append(prim)
+        backing = _drives_backward(prim)
         if mission.vo is not None:
             mission._vo_update()
     stats.outcome = "cycle budget used up"

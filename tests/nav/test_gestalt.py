@@ -17,6 +17,9 @@ from nav.gestalt import (
     arbitrate,
     arc_pose,
     arcs,
+    closest_approach,
+    cost_to_go,
+    goal_arc,
     vote_arcs,
     waypoint_votes,
 )
@@ -167,6 +170,44 @@ def test_newer_data_overwrites_older() -> None:
     assert cell_value(w, w.goodness, (0.1, 0.0)) == 0.0  # the seam is a 50 cm step
 
 
+def test_a_farther_look_does_not_erase_a_nearer_one() -> None:
+    """Stereo error grows with range: a cell seen from 1 m keeps that look when later seen from 3 m."""
+    gmap = GoodnessMap(P)
+    gmap.update(point_cloud(flat, (1.0, 3.0), (-1.0, 1.0)), np.array([0.0, 0.0]))  # cells at 1-3 m
+    far_and_wrong = point_cloud(lambda x, y: np.full_like(x, 0.3), (1.0, 3.0), (-1.0, 1.0), seed=3)
+    gmap.update(far_and_wrong, np.array([-2.0, 0.0]))  # the same cells, now 3-5 m away
+    w = gmap.evaluate(np.zeros(2))
+    assert cell_value(w, w.elevation_m, (2.0, 0.0)) == pytest.approx(0.0, abs=0.01)
+    assert cell_value(w, w.range_m, (2.0, 0.0)) == pytest.approx(2.0, abs=0.15)
+    gmap.update(far_and_wrong, np.array([2.0, 0.0]))  # and from right above: replaced
+    w = gmap.evaluate(np.zeros(2))
+    assert cell_value(w, w.elevation_m, (2.0, 0.0)) == pytest.approx(0.3, abs=0.01)
+    paper = GoodnessMap(GestaltParams(keep_closer_slack_m=None))  # the paper's rule: newest wins
+    paper.update(point_cloud(flat, (1.0, 3.0), (-1.0, 1.0)), np.zeros(2))
+    paper.update(far_and_wrong, np.array([-2.0, 0.0]))
+    w = paper.evaluate(np.zeros(2))
+    assert cell_value(w, w.elevation_m, (2.0, 0.0)) == pytest.approx(0.3, abs=0.01)
+
+
+def test_a_lone_stereo_blunder_is_not_a_rock() -> None:
+    cloud = point_cloud(flat, (0.0, 3.0), (-1.5, 1.5))
+    blunder = np.array([[1.51, 0.01, 0.45]])  # one mismatched point 45 cm up in a cell of ~24 points
+    trimmed = GoodnessMap(P)
+    trimmed.update(np.vstack([cloud, blunder]), np.zeros(2))
+    w = trimmed.evaluate(np.zeros(2))
+    assert cell_value(w, w.step_m, (1.5, 0.0)) < P.benign_step_m
+    assert cell_value(w, w.goodness, (1.5, 0.0)) > 0.5
+    raw = GoodnessMap(GestaltParams(extreme_trim_fraction=0.0))
+    raw.update(np.vstack([cloud, blunder]), np.zeros(2))
+    w = raw.evaluate(np.zeros(2))
+    assert cell_value(w, w.step_m, (1.5, 0.0)) > 0.4  # untrimmed, the blunder is a 45 cm step
+    # a real rock is many points: trimming leaves it impassable
+    rock = GoodnessMap(P)
+    rock.update(point_cloud(with_rock((1.5, 0.0), 0.3, 0.3), (0.0, 3.0), (-1.5, 1.5)), np.zeros(2))
+    w = rock.evaluate(np.zeros(2))
+    assert cell_value(w, w.goodness, (1.5, 0.0)) == 0.0
+
+
 def test_map_window_follows_the_rover() -> None:
     gmap = GoodnessMap(P)
     gmap.update(point_cloud(flat, (-1, 9), (-3, 3)), np.array([4.0, 0.0]))
@@ -228,7 +269,7 @@ def test_nearer_obstacles_cost_more() -> None:
     arc_list = arcs(P)
     straight = next(i for i, a in enumerate(arc_list) if a.direction == 1 and a.curvature_per_m == 0)
     votes = []
-    for x_obstacle in (1.9, 2.7):  # both beyond near_distance_m
+    for x_obstacle in (2.2, 2.9):  # both beyond the core's reach over near_distance_m (1.5 + 0.45 m)
         w = synthetic_window()
         i, j, _ = w.cell_index(np.array([[x_obstacle, -0.4], [x_obstacle, 0.4]]))
         w.goodness[i[0] : i[1] + 1, j[0] : j[1] + 1] = 0.0
@@ -293,6 +334,102 @@ def test_arbitrate() -> None:
     assert none is None
 
 
+def wall_window(gap_y: tuple[float, float] | None = (1.4, 2.6), x_wall: float = 2.0) -> GoodnessWindow:
+    """Benign ground with an impassable wall across x = x_wall, open between ``gap_y`` (world y)."""
+    w = synthetic_window()
+    centres = w.cell_centres_xy()
+    wall = np.abs(centres[..., 0] - x_wall) < 0.15
+    if gap_y is not None:
+        wall &= ~((centres[..., 1] > gap_y[0]) & (centres[..., 1] < gap_y[1]))
+    w.goodness[wall] = 0.0
+    return w
+
+
+def test_cost_to_go_goes_round_walls() -> None:
+    goal = np.array([4.0, 0.0])
+    open_field = cost_to_go(synthetic_window(), np.zeros(3), goal, P)
+    assert float(open_field.at(np.array([[0.0, 0.0]]))[0]) == pytest.approx(4.0, abs=0.15)  # straight line
+    field = cost_to_go(wall_window(), np.zeros(3), goal, P)
+    c0 = float(field.at(np.array([[0.0, 0.0]]))[0])
+    via_gap = np.hypot(2.0, 2.0 - P.core_half_width_m) + np.hypot(2.0, 2.0 - P.core_half_width_m)
+    assert via_gap < c0 < via_gap + 1.5  # round through the gap (plus the cost of passing near the wall)
+    assert field.blocked[field.cost.shape[0] // 2 + 10, field.cost.shape[1] // 2]  # the wall (x = 2.0, y = 0)
+    # the goal outside the window: edge cells are charged their straight-line distance to it
+    far = cost_to_go(synthetic_window(), np.zeros(3), np.array([20.0, 0.0]), P)
+    assert float(far.at(np.array([[0.0, 0.0]]))[0]) == pytest.approx(20.0, abs=0.2)
+
+
+def test_waypoint_votes_follow_the_detour_not_the_bearing() -> None:
+    """Goal straight ahead behind a wall with a gap to the left: the path-cost votes prefer turning left,
+    the straight-line votes would go straight at the wall."""
+    arc_list = arcs(P)
+    goal = np.array([4.0, 0.0])
+    w = wall_window()
+    field = cost_to_go(w, np.zeros(3), goal, P)
+    by_cost = waypoint_votes(arc_list, np.zeros(3), goal, P, field)
+    by_bearing = waypoint_votes(arc_list, np.zeros(3), goal, P)
+    fwd = [k for k, a in enumerate(arc_list) if a.direction == 1]
+    best_cost = arc_list[max(fwd, key=lambda k: by_cost[k])]
+    best_bearing = arc_list[max(fwd, key=lambda k: by_bearing[k])]
+    assert best_bearing.curvature_per_m == 0.0
+    assert best_cost.curvature_per_m > 0.2  # left, towards the gap
+    straight = next(k for k in fwd if arc_list[k].curvature_per_m == 0.0)
+    assert by_cost[straight] < by_cost[arc_list.index(best_cost)] - 0.1
+
+
+def test_an_obstacle_seen_only_from_afar_is_costly_not_a_wall() -> None:
+    w = wall_window(gap_y=None)
+    near = cost_to_go(w, np.zeros(3), np.array([4.0, 0.0]), P)
+    assert not np.isfinite(float(near.at(np.array([[0.0, 0.0]]))[0]))  # sealed off
+    seen_far = GoodnessWindow(
+        w.origin_cell, w.cell_size_m, w.goodness, w.elevation_m, w.tilt_deg, w.roughness_m, w.step_m,
+        w.point_count, np.full(w.shape, P.certain_range_m + 0.5),
+    )
+    far = cost_to_go(seen_far, np.zeros(3), np.array([4.0, 0.0]), P)
+    c = float(far.at(np.array([[0.0, 0.0]]))[0])
+    assert 4.0 < c < 4.0 + 0.3 * P.far_obstacle_cost + 2 * P.clearance_cost
+
+
+def test_goal_capture_drives_onto_the_goal() -> None:
+    pose = np.array([1.0, 2.0, 0.3])
+    goal = pose[:2] + 1.1 * np.array([np.cos(0.5), np.sin(0.5)])  # 1.1 m away, 0.2 rad to the left
+    arc, length = goal_arc(pose, goal, P)
+    end = drive(arc, pose, length)
+    np.testing.assert_allclose(end[:2], goal, atol=1e-9)
+    assert arc.curvature_per_m > 0 and length == pytest.approx(1.1, rel=0.02)
+    assert goal_arc(pose, pose[:2] + [5.0, 0.0], P) is None  # too far to capture
+    assert goal_arc(pose, pose[:2] - 1.0 * np.array([np.cos(0.3), np.sin(0.3)]), P) is None  # behind
+    planner = GestaltPlanner(P)
+    d = planner.step(point_cloud(flat, (-1.0, 5.0), (-3.0, 5.0)), pose, goal)
+    assert d.drive_m == pytest.approx(length) and d.arc.curvature_per_m == pytest.approx(arc.curvature_per_m)
+    assert "to the goal" in d.reason
+    straight = next(a for a in arcs(P) if a.direction == 1 and a.curvature_per_m == 0.0)
+    s = closest_approach(straight, np.zeros(3), np.array([0.9, 0.2]), P)
+    assert s == pytest.approx(0.9, abs=0.05)
+    assert closest_approach(straight, np.zeros(3), np.array([4.0, 0.0]), P) is None
+
+
+def test_arbiter_keeps_wheels_off_doubtful_ground() -> None:
+    """Two arcs alike but for the worst cell their core meets: the one clear of it wins."""
+    trav = ArcVotes(np.array([0.9, 0.88]), np.array([False, False]), np.zeros((2, 1, 1)), np.array([0.1, 0.9]))
+    best, score = arbitrate(trav, np.array([0.95, 0.9]), np.array([1, 1]), P)
+    assert best == 1
+    assert score[1] - score[0] == pytest.approx(-0.02 - 0.05 + P.worst_weight * 0.8)
+
+
+def test_a_point_turn_sweeps_the_corners() -> None:
+    """The rover is a rectangle carried along each arc: turning in place its corners sweep a disc, so a rock
+    beside the middle wheel stops a point turn but not a drive straight ahead."""
+    arc_list = arcs(P)
+    straight = next(k for k, a in enumerate(arc_list) if a.direction == 1 and a.curvature_per_m == 0.0)
+    turns = [k for k, a in enumerate(arc_list) if a.direction == 0]
+    w = synthetic_window()
+    i, j, _ = w.cell_index(np.array([[0.05, -0.55]]))  # beside the rover, outside the core's half-width
+    w.goodness[i[0], j[0]] = 0.0
+    v = vote_arcs(w, np.zeros(3), arc_list, P)
+    assert v.vetoed[turns].all() and not v.vetoed[straight]
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Whole cycles on point clouds
 # --------------------------------------------------------------------------------------------------------------
@@ -307,8 +444,8 @@ def drive(arc: Arc, pose: np.ndarray, distance_m: float) -> np.ndarray:
 
 def test_rock_ahead_vetoes_straight_and_a_side_arc_still_heads_for_the_goal() -> None:
     planner = GestaltPlanner(P)
-    cloud = point_cloud(with_rock((2.2, 0.0), 0.35, 0.40), (-1.0, 9.0), (-4.0, 4.0))
-    goal = np.array([6.0, 0.0])
+    cloud = point_cloud(with_rock((2.6, 0.0), 0.35, 0.40), (-1.0, 9.0), (-4.0, 4.0))
+    goal = np.array([6.4, 0.0])
     pose = np.zeros(3)
     d = planner.step(cloud, pose, goal)
     straight = next(k for k, a in enumerate(planner.arcs) if a.direction == 1 and a.curvature_per_m == 0)
@@ -320,7 +457,7 @@ def test_rock_ahead_vetoes_straight_and_a_side_arc_still_heads_for_the_goal() ->
     # drive, image (the same terrain), repeat: the rover gets round the rock to the goal
     for _ in range(25):
         pose = drive(d.arc, pose, P.step_distance_m) if d.arc.direction else pose + [0.0, 0.0, d.arc.turn_rad]
-        assert np.hypot(pose[0] - 2.2, pose[1]) > 0.35 + 0.65  # wheels (0.55-0.63 m out) never on the rock
+        assert np.hypot(pose[0] - 2.6, pose[1]) > 0.35 + 0.9  # wheels and their corners (0.63 / 0.86 m out) clear
         if np.hypot(*(goal - pose[:2])) < 0.75:
             break
         d = planner.step(cloud, pose, goal)
