@@ -25,7 +25,10 @@ One cycle, :meth:`GestaltPlanner.step`, reads as the paper's steps:
    safe arcs, or none. The waypoint input is a path-cost field to the goal over the goodness window (Dijkstra;
    the MER flight software gained such a field in 2006, Carsten et al. 2007), so that an arc making progress along
    a detour round a rock outvotes one pointing straight at the goal behind it; near the goal the arc through the
-   goal itself is driven (:func:`goal_arc`).
+   goal itself is driven (:func:`goal_arc`). Against dithering (GESTALT's classic failure: left-right-left, or
+   forward-back-forward in front of a gap it cannot quite take) the arbiter penalises taking back the previous
+   move (:func:`undoes`), the path walls off gaps narrower than the arcs can thread, and every cycle the rover
+   stands somewhere makes the path there dearer (``GestaltPlanner.visits``).
 
 Frames: world x east, y north, z up; poses are ``(x_m, y_m, yaw_rad)`` in the world, yaw about +z from +x. Arcs are
 defined in the rover frame (x forward, y left). Pure: no drawing or logging; every result is returned as data.
@@ -130,24 +133,30 @@ class GestaltParams:
     # ... plus up to clearance_cost per metre closer than clearance_range_m to a wall (falling linearly to 0 there)
     clearance_cost: float = 2.0
     clearance_range_m: float = 0.8
+    # walls are grown by core_half_width_m plus this for the path: a gap only a perfectly aligned rover could thread
+    # (single arcs, the core's corners swinging on a turn) is closed to the path, rather than dithered in front of
+    path_margin_m: float = 0.2
+    # each cycle the rover has stood within visit_radius_m of a cell adds visit_cost per metre there
+    visit_cost: float = 0.5
+    visit_radius_m: float = 0.3
     progress_weight: float = 1.0  # waypoint vote: distance gained towards the goal over this cycle's drive ...
     heading_weight: float = 1.0  # ... and how well the rover then faces the goal
     heading_lookahead_m: float = 1.5  # with a path-cost field: heading judged by the cost gained this far along
     use_path_cost: bool = True  # waypoint votes from the path-cost field (False: straight line to the goal)
     traversability_weight: float = 1.0  # arbiter: score = traversability_weight * trav + waypoint_weight * wp
-    waypoint_weight: float = 1.0
+    waypoint_weight: float = 2.0
     # ... plus worst_weight * the lowest goodness the footprint meets within near_distance_m: stereo reads a rock
     # some centimetres low, so a rock just over the limit can look merely "poor"; keep the wheels off poor cells
     worst_weight: float = 1.0
     # ... minus a preference for driving forward: a point turn makes no progress and its footprint (the ground the
     # rover stands on) always votes well; driving backward the rover does not look where it goes.
     backward_penalty: float = 0.1
-    point_turn_penalty: float = 0.25
+    point_turn_penalty: float = 0.15
     min_traversability_vote: float = 0.2  # arcs voted below this are never chosen
     # taking back the previous move (the opposite point turn; driving back along the circle just driven, within
     # undo_curvature_per_m) costs this much: it breaks left-right-left dithering, yet a real dead end still wins
     undo_penalty: float = 0.3
-    undo_curvature_per_m: float = 0.25
+    undo_curvature_per_m: float = 0.6
 
     def __post_init__(self) -> None:
         if self.cell_size_m <= 0 or self.map_size_m < 4 * self.cell_size_m:
@@ -532,7 +541,8 @@ def closest_approach(
     arc: Arc, pose_xy_yaw: np.ndarray, goal_xy: np.ndarray, params: GestaltParams = GestaltParams()
 ) -> float | None:
     """Near the goal (``capture_distance_m``): how far to drive along ``arc`` to pass closest to the goal, at
-    least ``min_drive_m``, at most ``capture_distance_m`` (a driving arc only). None when the goal is farther or the arc is a point turn."""
+    least ``min_drive_m``, at most ``capture_distance_m`` (a driving arc only). None when the goal is farther or
+    the arc is a point turn."""
     p = params
     x, y, yaw = (float(v) for v in pose_xy_yaw)
     goal = np.asarray(goal_xy, dtype=float)
@@ -722,7 +732,11 @@ def _disc(radius_cells: float) -> np.ndarray:
 
 
 def cost_to_go(
-    window: GoodnessWindow, pose_xy_yaw: np.ndarray, goal_xy: np.ndarray, params: GestaltParams = GestaltParams()
+    window: GoodnessWindow,
+    pose_xy_yaw: np.ndarray,
+    goal_xy: np.ndarray,
+    params: GestaltParams = GestaltParams(),
+    visits: np.ndarray | None = None,
 ) -> CostToGo:
     """Waypoint input for the arbiter: the cost of the best grid path (8-connected, Dijkstra) to the goal.
 
@@ -731,8 +745,12 @@ def cost_to_go(
     path-cost field for exactly this: arcs are judged by how much they lower the cost still to go. A step between
     cells costs its length times ``1 + goodness_cost * (1 - goodness)``; unknown cells cost ``unknown_cost`` per
     metre (optimistic: unseen ground may be clear); impassable cells, grown by the footprint core's half-width
-    (``core_half_width_m``) so that the path only uses gaps the arcs may use, are walls.
-    Unknown cells within ``assume_safe_radius_m`` of the rover count as benign, as for the votes.
+    plus a margin (``core_half_width_m + path_margin_m``) so that the path only uses gaps the arcs can use, are
+    walls.
+    Unknown cells within ``assume_safe_radius_m`` of the rover count as benign, as for the votes; other unknown
+    cells the arcs could reach within ``near_distance_m`` are walls (the vetoes refuse them). ``visits`` (window
+    shaped) counts the cycles the rover has stood near each cell; each adds ``visit_cost`` per metre, so a rover
+    dithering between two places makes both dearer until another way wins.
     """
     p = params
     g = window.goodness
@@ -745,7 +763,7 @@ def cost_to_go(
     # a wall, until a nearer look confirms it
     far = impassable & (window.range_m > p.certain_range_m) if window.range_m is not None else np.zeros_like(impassable)
     wall = (impassable & ~far).astype(np.uint8)
-    core = p.core_half_width_m
+    core = p.core_half_width_m + p.path_margin_m
     blocked = cv2.dilate(wall, _disc(core / cs)).astype(bool) if core > 0 else wall.astype(bool)
     centres = window.cell_centres_xy()
     under_rover = np.hypot(centres[..., 0] - x, centres[..., 1] - y) <= p.assume_safe_radius_m
@@ -754,10 +772,16 @@ def cost_to_go(
     factor = 1.0 + p.goodness_cost * (1.0 - g0) + p.doubt_cost * np.clip(1.0 - g0 / p.doubt_goodness, 0.0, 1.0)
     factor = np.where(unknown, np.where(under_rover, 1.0, p.unknown_cost), factor)
     factor = np.where(far, p.far_obstacle_cost, factor)
+    if visits is not None:  # ground the rover has stood on many times: somewhere else, please
+        factor = factor + p.visit_cost * visits
     # keep clear of walls where there is room: shortest paths otherwise graze them at the veto's margin
     if p.clearance_cost > 0 and wall.any():
         dist = cv2.distanceTransform((1 - wall).astype(np.uint8), cv2.DIST_L2, 5) * cs
         factor = factor + p.clearance_cost * np.clip(1.0 - dist / p.clearance_range_m, 0.0, 1.0)
+    # unknown ground the arcs' vetoes would refuse (near the rover, not under it) is a wall for the path too, or the
+    # field would lead into what the arcs cannot enter (a rock's shadow) and the rover would dither in front of it
+    near_rover = np.hypot(centres[..., 0] - x, centres[..., 1] - y) <= p.near_distance_m + p.core_half_length_m
+    blocked = blocked | (unknown & near_rover & ~under_rover)
     factor = np.where(blocked, np.inf, factor)
     idx = np.arange(n0 * n1).reshape(n0, n1)
     rows, cols, wts = [], [], []
@@ -807,7 +831,8 @@ def waypoint_votes(
     (b) heading, how well the rover then faces the way on (-1..1); weighted by ``progress_weight`` and
     ``heading_weight`` and mapped to [0, 1].
 
-    Without ``cost`` distances are straight lines and heading is the cosine of the angle to the goal's bearing.
+    Without ``cost`` (or when it walls the rover in: no arc ends on a cell with a way to the goal) distances are
+    straight lines and heading is the cosine of the angle to the goal's bearing.
     With a :class:`CostToGo` field, distance is the path cost still to go (so a detour round a rock is progress)
     and heading is the progress made by going on along the arc to ``heading_lookahead_m`` (a point turn: straight
     on after the turn; -1 into a wall).
@@ -829,12 +854,14 @@ def waypoint_votes(
     d_end = np.hypot(goal[0] - ex, goal[1] - ey)
     bearing = np.arctan2(goal[1] - ey, goal[0] - ex)
     geometric_heading = np.where(d_end > 1e-6, np.cos(bearing - eyaw), 1.0)
-    if cost is None:
+    c_end = cost.at(np.stack([ex, ey], axis=1)) if cost is not None else None
+    if c_end is None or not np.isfinite(c_end).any():
+        # no field, or one that walls the rover in (it sees no way out from here): go by the bearing, the vetoes
+        # keep it safe, and the next images may open a way
         d_now = np.hypot(goal[0] - x, goal[1] - y)
         progress = np.where(driven > 0, (d_now - d_end) / np.maximum(driven, 1e-9), 0.0)
         heading = geometric_heading
     else:
-        c_end = cost.at(np.stack([ex, ey], axis=1))
         c_now = float(cost.at(np.array([[x, y]]))[0])
         if not np.isfinite(c_now):  # standing in a (falsely) blocked cell: judge against the best way out
             finite = c_end[np.isfinite(c_end)]
@@ -937,6 +964,26 @@ class GestaltPlanner:
         self._footprint = _footprints(self.arcs, params)
         self._directions = np.array([a.direction for a in self.arcs])
         self.previous: Arc | None = None  # the arc chosen last cycle (the driver may overrule: see ``step``)
+        self.visits: dict[tuple[int, int], int] = {}  # world cell -> cycles the rover stood within visit_radius_m
+
+    def _visit(self, xy: np.ndarray) -> None:
+        cs, r = self.params.cell_size_m, self.params.visit_radius_m
+        ix, iy = int(np.floor(xy[0] / cs)), int(np.floor(xy[1] / cs))
+        m = int(np.ceil(r / cs))
+        for dx in range(-m, m + 1):
+            for dy in range(-m, m + 1):
+                cx, cy = (ix + dx + 0.5) * cs, (iy + dy + 0.5) * cs
+                if np.hypot(cx - xy[0], cy - xy[1]) <= r + 1e-9:
+                    self.visits[(ix + dx, iy + dy)] = self.visits.get((ix + dx, iy + dy), 0) + 1
+
+    def visit_window(self, window: GoodnessWindow) -> np.ndarray:
+        """The visit counts over ``window`` (window-shaped)."""
+        out = np.zeros(window.shape)
+        (ox, oy), (n0, n1) = window.origin_cell, window.shape
+        for (ix, iy), count in self.visits.items():
+            if 0 <= ix - ox < n0 and 0 <= iy - oy < n1:
+                out[ix - ox, iy - oy] = count
+        return out
 
     def step(self, points_world: np.ndarray, pose_xy_yaw: np.ndarray, goal_xy: np.ndarray) -> Decision:
         """Update map -> evaluate goodness -> vote -> arbitrate. ``points_world`` (N, 3) may be empty.
@@ -950,7 +997,8 @@ class GestaltPlanner:
         self.map.update(points_world, pose[:2])
         window = self.map.evaluate(pose[:2])
         trav = vote_arcs(window, pose, self.arcs, p, self._footprint)
-        field = cost_to_go(window, pose, goal_xy, p) if p.use_path_cost else None
+        field = cost_to_go(window, pose, goal_xy, p, self.visit_window(window)) if p.use_path_cost else None
+        self._visit(pose[:2])  # counted from the next cycle on
         wp = waypoint_votes(self.arcs, pose, goal_xy, p, field)
         best, score = arbitrate(trav, wp, self._directions, p, undoes(self.arcs, self.previous, p))
         capture = goal_arc(pose, goal_xy, p)

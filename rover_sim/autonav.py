@@ -2,7 +2,12 @@
 
 Each cycle: hazcam stereo pair -> SAD stereo range image -> points in the world frame *via the onboard pose*
 (never the truth) -> goodness map update -> arc votes + waypoint votes -> the winning arc is driven for
-``step_m`` -> stop, image, repeat; until the onboard pose is within ``tolerance_m`` of the goal or no arc is safe.
+``step_m`` (near the goal: the arc through the goal, all the way) -> stop, image, repeat; until the onboard pose is
+within ``tolerance_m`` of the goal or no arc is safe.
+
+Range points kept for the map: within ``MAX_RANGE_M`` (hazcam stereo is too coarse beyond) and outside the rover's
+own plan-view box (the hazcams see the front wheels). After a backward drive the rear hazcam pair is imaged as well,
+so the rover sees the ground it backs into. No safe arc: retrace the last drive and look again.
 """
 
 from __future__ import annotations
@@ -101,7 +106,8 @@ def run_autonav(mission: Mission, cmd: AutonavCmd, params: GestaltParams | None 
         ri = range_image(frame.left, frame.right, rig, stereo)
         pts = terrain_points(ri.points_rover_m())
         if rear is not None:
-            pts = np.vstack([pts, terrain_points(range_image(rear.left, rear.right, rear_rig, stereo).points_rover_m())])
+            rear_ri = range_image(rear.left, rear.right, rear_rig, stereo)
+            pts = np.vstack([pts, terrain_points(rear_ri.points_rover_m())])
         T = pose.as_matrix()
         pts_world = transform_points(T, pts)
         yaw = _heading(T[:3, :3])

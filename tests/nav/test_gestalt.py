@@ -20,6 +20,7 @@ from nav.gestalt import (
     closest_approach,
     cost_to_go,
     goal_arc,
+    undoes,
     vote_arcs,
     waypoint_votes,
 )
@@ -323,18 +324,21 @@ def test_waypoint_votes_prefer_arcs_towards_the_goal() -> None:
 
 def test_arbitrate() -> None:
     trav = ArcVotes(np.array([0.9, 0.8, 0.1, 0.95, 1.0]), np.array([0, 0, 0, 1, 0], bool), np.zeros((5, 1, 1)))
-    wp = np.array([0.2, 0.9, 1.0, 1.0, 0.9])
+    wp = np.array([0.2, 0.9, 1.0, 1.0, 0.85])
     best, score = arbitrate(trav, wp, np.array([1, 1, 1, 1, 0]), P)
     wt, ww = P.traversability_weight, P.waypoint_weight
-    assert best == 1  # 0.8 / 0.9 beats 0.9 / 0.2 and, through the point-turn penalty, the turn's 1.0 / 0.9
+    assert best == 1  # 0.8 / 0.9 beats 0.9 / 0.2 and, through the point-turn penalty, the turn's 1.0 / 0.85
     assert np.isnan(score[2]) and np.isnan(score[3])  # too poor, vetoed
     np.testing.assert_allclose(score[[0, 1]], wt * trav.vote[[0, 1]] + ww * wp[[0, 1]])
-    assert score[4] == pytest.approx(wt * 1.0 + ww * 0.9 - P.point_turn_penalty)
+    assert score[4] == pytest.approx(wt * 1.0 + ww * 0.85 - P.point_turn_penalty)
+    # taking back the previous move is penalised: the same choice with arc 1 marked as an undo goes to arc 0 ...
+    _, undone = arbitrate(trav, wp, np.array([1, 1, 1, 1, 0]), P, undo=np.array([0, 1, 0, 0, 0], bool))
+    assert undone[1] == pytest.approx(score[1] - P.undo_penalty)
     none, _ = arbitrate(ArcVotes(np.zeros(2), np.array([True, True]), np.zeros((2, 1, 1))), np.ones(2), np.ones(2), P)
     assert none is None
 
 
-def wall_window(gap_y: tuple[float, float] | None = (1.4, 2.6), x_wall: float = 2.0) -> GoodnessWindow:
+def wall_window(gap_y: tuple[float, float] | None = (1.0, 3.0), x_wall: float = 2.0) -> GoodnessWindow:
     """Benign ground with an impassable wall across x = x_wall, open between ``gap_y`` (world y)."""
     w = synthetic_window()
     centres = w.cell_centres_xy()
@@ -351,8 +355,13 @@ def test_cost_to_go_goes_round_walls() -> None:
     assert float(open_field.at(np.array([[0.0, 0.0]]))[0]) == pytest.approx(4.0, abs=0.15)  # straight line
     field = cost_to_go(wall_window(), np.zeros(3), goal, P)
     c0 = float(field.at(np.array([[0.0, 0.0]]))[0])
-    via_gap = np.hypot(2.0, 2.0 - P.core_half_width_m) + np.hypot(2.0, 2.0 - P.core_half_width_m)
-    assert via_gap < c0 < via_gap + 1.5  # round through the gap (plus the cost of passing near the wall)
+    # round the wall's end, grown by the core's half-width and the path margin (plus the cost of passing near it)
+    grown = P.core_half_width_m + P.path_margin_m
+    corner = np.array([2.0 - 0.15 - grown, 1.0 + grown])
+    via_gap = 2 * np.hypot(*corner) + 2 * (0.15 + grown)
+    assert via_gap - 0.3 < c0 < via_gap + 2.0
+    narrow = cost_to_go(wall_window(gap_y=(1.4, 2.6)), np.zeros(3), goal, P)  # 1.2 m: too narrow to thread
+    assert float(narrow.at(np.array([[0.0, 0.0]]))[0]) > c0 + 1.0
     assert field.blocked[field.cost.shape[0] // 2 + 10, field.cost.shape[1] // 2]  # the wall (x = 2.0, y = 0)
     # the goal outside the window: edge cells are charged their straight-line distance to it
     far = cost_to_go(synthetic_window(), np.zeros(3), np.array([20.0, 0.0]), P)
@@ -382,12 +391,34 @@ def test_an_obstacle_seen_only_from_afar_is_costly_not_a_wall() -> None:
     near = cost_to_go(w, np.zeros(3), np.array([4.0, 0.0]), P)
     assert not np.isfinite(float(near.at(np.array([[0.0, 0.0]]))[0]))  # sealed off
     seen_far = GoodnessWindow(
-        w.origin_cell, w.cell_size_m, w.goodness, w.elevation_m, w.tilt_deg, w.roughness_m, w.step_m,
-        w.point_count, np.full(w.shape, P.certain_range_m + 0.5),
+        w.origin_cell,
+        w.cell_size_m,
+        w.goodness,
+        w.elevation_m,
+        w.tilt_deg,
+        w.roughness_m,
+        w.step_m,
+        w.point_count,
+        np.full(w.shape, P.certain_range_m + 0.5),
     )
     far = cost_to_go(seen_far, np.zeros(3), np.array([4.0, 0.0]), P)
     c = float(far.at(np.array([[0.0, 0.0]]))[0])
     assert 4.0 < c < 4.0 + 0.3 * P.far_obstacle_cost + 2 * P.clearance_cost
+
+
+def test_ground_stood_on_again_and_again_gets_dearer() -> None:
+    """The planner counts the cycles it stood near each cell; the path cost rises there, so dithering between
+    two places makes both dearer until another way wins."""
+    planner = GestaltPlanner(P)
+    cloud = point_cloud(flat, (-2.0, 5.0), (-3.0, 3.0))
+    pose, goal = np.zeros(3), np.array([8.0, 0.0])
+    first = planner.step(cloud, pose, goal).cost
+    for _ in range(6):
+        last = planner.step(cloud, pose, goal).cost
+    here, away = np.array([[0.0, 0.0]]), np.array([[0.0, 1.5]])
+    assert float(last.at(here)[0]) > float(first.at(here)[0]) + 0.3
+    assert float(last.at(away)[0]) == pytest.approx(float(first.at(away)[0]), abs=1e-9)
+    assert planner.visit_window(planner.map.evaluate(pose[:2])).max() == 7
 
 
 def test_goal_capture_drives_onto_the_goal() -> None:
@@ -412,9 +443,22 @@ def test_goal_capture_drives_onto_the_goal() -> None:
 def test_arbiter_keeps_wheels_off_doubtful_ground() -> None:
     """Two arcs alike but for the worst cell their core meets: the one clear of it wins."""
     trav = ArcVotes(np.array([0.9, 0.88]), np.array([False, False]), np.zeros((2, 1, 1)), np.array([0.1, 0.9]))
-    best, score = arbitrate(trav, np.array([0.95, 0.9]), np.array([1, 1]), P)
+    best, score = arbitrate(trav, np.array([0.95, 0.92]), np.array([1, 1]), P)
     assert best == 1
-    assert score[1] - score[0] == pytest.approx(-0.02 - 0.05 + P.worst_weight * 0.8)
+    wt, ww = P.traversability_weight, P.waypoint_weight
+    assert score[1] - score[0] == pytest.approx(-0.02 * wt - 0.03 * ww + P.worst_weight * 0.8)
+
+
+def test_undoes_marks_the_move_that_takes_back_the_last() -> None:
+    arc_list = arcs(P)
+    by_name = {a.name: k for k, a in enumerate(arc_list)}
+    left = arc_list[by_name["turn_left"]]
+    assert list(np.flatnonzero(undoes(arc_list, left, P))) == [by_name["turn_right"]]
+    fwd = next(a for a in arc_list if a.direction == 1 and a.curvature_per_m == pytest.approx(0.455, abs=1e-3))
+    marked = [arc_list[k] for k in np.flatnonzero(undoes(arc_list, fwd, P))]
+    assert marked and all(a.direction == -1 for a in marked)
+    assert all(abs(a.curvature_per_m - fwd.curvature_per_m) <= P.undo_curvature_per_m for a in marked)
+    assert not undoes(arc_list, None, P).any()
 
 
 def test_a_point_turn_sweeps_the_corners() -> None:
