@@ -66,12 +66,16 @@ def bench_stereo_cmd(json: JsonOpt = None) -> None:
 
 @bench_app.command("autonav")
 def bench_autonav_cmd(
-    json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Number of seeded rock fields.")] = 20
+    json: JsonOpt = None,
+    runs: Annotated[int, typer.Option(help="Number of seeded rock fields.")] = 20,
+    first_seed: Annotated[int, typer.Option(help="Seed of the first field.")] = 0,
+    seed: Annotated[list[int] | None, typer.Option(help="Run only these seeds (repeatable).")] = None,
+    workers: Annotated[int, typer.Option(help="Fields run at once (spawn pool; cycle times then share cores).")] = 1,
 ) -> None:
     """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away)."""
     from rover_sim.bench.autonav import bench_autonav
 
-    r = bench_autonav(str(json) if json else None, runs=runs)
+    r = bench_autonav(str(json) if json else None, runs=runs, first_seed=first_seed, workers=workers, seeds=seed)
     if r["reached"] < 0.95 * r["runs"] or r["collisions"] > 0:
         raise typer.Exit(code=1)
 
