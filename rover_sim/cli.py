@@ -202,7 +202,8 @@ def run_cmd(
         f"distance {metrics.distance_m:.2f} m | DR error {metrics.dr_error_pct:.2f} % | VO error "
         f"{metrics.vo_error_pct} % | VO convergence {metrics.vo_convergence_pct} % | max slip {metrics.max_slip_pct} %"
     )
-    typer.echo(f"outputs in {out}/ (plots in {out}/plots/); open the recording with: rerun {out}/recording.rrd")
+    where = f"outputs in {out}/ (plots in {out}/plots/)"
+    typer.echo(f"{where}; open the recording with: rerun {out}/recording.rrd" if record else where)
     if not metrics.passed:
         raise typer.Exit(code=1)
 

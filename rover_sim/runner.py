@@ -665,7 +665,9 @@ def run_scenario(
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(desc=sc.name, unit="sim-s", bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]")
+        bar = tqdm(
+            desc=sc.name, unit="sim-s", mininterval=1.0, bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]"
+        )
 
     def on_progress(t_s: float, _msg: str) -> None:
         if bar is not None and t_s - bar.n >= 1.0:
