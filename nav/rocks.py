@@ -28,9 +28,11 @@ Then, between sites:
    geometric pattern of the rock positions (a RANSAC over pairs of candidates for a 4-DOF transform: yaw and
    translation, since roll and pitch come from the accelerometers), then a weighted least-squares transform from the
    consistent matches and a significance test against chance agreement.
-6. :class:`SiteChain` - incremental adjustment of a chain of sites: unknown site poses (x, y, z, yaw), tie-point
-   positions and a line-of-sight offset of the tie points, observed as odometry between consecutive sites and as
-   rock positions seen from each site, solved by weighted least squares every time a site is added.
+6. :class:`SiteChain` - incremental adjustment of a chain of sites (the paper: matched rocks are tie points of an
+   incremental bundle adjustment), as a weighted least-squares pose graph: unknown site poses (x, y, z, yaw) and
+   systematic tie-point error terms, observed as odometry legs between consecutive sites (VO's own covariance, the
+   gyro's heading drift) and as site-to-site transforms from the matched rocks (covariance from the fit, scaled by
+   the match residuals), solved every time a site is added.
 
 Frames: each site's points and rocks are in that site's *estimated* world frame (x east, y north, z up), i.e. rover
 frame points mapped through the onboard pose estimate at the site; the estimates of two sites differ from the truth
@@ -431,19 +433,32 @@ def extract_peaks(points: np.ndarray, params: RockParams = RockParams()) -> list
     support = np.where((n_valid >= 3) & np.isfinite(top), median, -np.inf)
     w = max(1, int(round(params.peak_window_m / cell)))
     w += 1 - w % 2  # odd window centred on the cell
+    # the apex: the highest cell top of the 3 x 3 neighbourhood (a pointed rock's top cell outranks its neighbours
+    # by far more than their median does, so the support cell may be next to it)
+    apex_top, apex_point = top.copy(), top_point.copy()
+    padded_top = np.pad(top, 1, constant_values=-np.inf)
+    padded_idx = np.pad(top_point, 1, constant_values=-1)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            t = padded_top[1 + di : 1 + di + shape[0], 1 + dj : 1 + dj + shape[1]]
+            higher = t > apex_top
+            apex_top[higher] = t[higher]
+            apex_point[higher] = padded_idx[1 + di : 1 + di + shape[0], 1 + dj : 1 + dj + shape[1]][higher]
     win_top = maximum_filter(support, size=w, mode="constant", cval=-np.inf)
     win_bottom = minimum_filter(bottom, size=w, mode="constant", cval=np.inf)
     win_count = uniform_filter(count, size=w, mode="constant") * (w * w)
+    # the paper's height range: the window's highest point (robust: its k-th highest) above its lowest
+    win_range = maximum_filter(top, size=w, mode="constant", cval=-np.inf) - win_bottom
     is_peak = (
         np.isfinite(support)
         & (support >= win_top)
-        & (win_top - win_bottom >= params.min_height_range_m)
+        & (win_range >= params.min_height_range_m)
         & (win_count >= params.min_window_points - 0.5)
     )
     cells = np.flatnonzero(is_peak.ravel())
-    ranges, counts = win_top.flat[cells] - win_bottom.flat[cells], np.rint(win_count.flat[cells]).astype(int)
+    ranges, counts = win_range.flat[cells], np.rint(win_count.flat[cells]).astype(int)
     peaks = [
-        RockPeak(p[top_point.flat[c]].copy(), float(h), int(n)) for c, h, n in zip(cells, ranges, counts, strict=True)
+        RockPeak(p[apex_point.flat[c]].copy(), float(h), int(n)) for c, h, n in zip(cells, ranges, counts, strict=True)
     ]
     peaks.sort(key=lambda pk: -pk.xyz_m[2])
     return peaks
@@ -1160,64 +1175,116 @@ def _pose4_covariance(b: np.ndarray, T: Pose4, cov: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ChainParams:
-    """Tuning of :class:`SiteChain`."""
+    """Tuning of :class:`SiteChain`: the error models of the two kinds of observation.
 
-    odometry_sigma_frac: float = 0.02  # odometry position error per metre driven (VO: ~1-2 %; wheel odometry ~5-10 %)
+    Odometry legs: the position covariance VO reports for its own steps (summed over the leg by the caller) when
+    given, else ``odometry_sigma_floor_m + odometry_sigma_frac * distance`` per axis; the heading is the gyro's
+    (MER keeps the IMU attitude, VO corrects only position), so the leg's heading drift has the gyro datasheet's
+    bias instability times the leg's duration and its angle random walk times the root of it (LN-200 class:
+    1 deg/h, 0.07 deg/sqrt(h); without a duration, ``odometry_yaw_sigma_rad_per_m`` per metre). A heading (and
+    pitch) error growing over the leg moves its end across the track (and in height) by half the leg times it.
+    """
+
+    odometry_sigma_frac: float = 0.02  # fallback without VO's covariance (VO: ~1-2 %; wheel odometry ~5-10 %)
     odometry_sigma_floor_m: float = 0.05
-    odometry_yaw_sigma_rad_per_m: float = math.radians(0.1)  # heading drift per metre (gyro)
+    odometry_yaw_sigma_rad_per_m: float = math.radians(0.1)  # fallback without the leg's duration
+    gyro_bias_instability_deg_h: float = 1.0  # datasheet figures of the IMU (LN-200 class, REFERENCE section 1)
+    gyro_arw_deg_sqrt_h: float = 0.07
     max_match_distance_m: float = 26.0  # sites farther apart than this are not matched (paper: reliable to 26 m)
-    range_bias_terms: int = 1  # self-calibrated line-of-sight offset of the tie points: 0 none, 1 constant, 2 + r
-    range_bias_prior_m: float = 0.1  # prior sigma of each offset term
+    # self-calibrated systematic errors of the tie points (rock apexes): 0 none, 1 an offset along the line of
+    # sight (SAD windows on a convex rock see it a little too far), 2 also a height error growing with the range
+    range_bias_terms: int = 2
+    range_bias_prior_m: float = 0.1  # prior sigma of each term
     match: MatchParams = MatchParams()
 
 
 @dataclass
 class ChainSite:
-    """One site of a chain: its rocks (estimated frame), onboard position, and the adjusted correction."""
+    """One site of a chain: its rocks (estimated frame), onboard pose, leg error model and the adjusted pose."""
 
     rocks: SiteRocks
-    estimate_xyz_m: np.ndarray  # onboard position (the site frame's rover position)
+    estimate: Pose4  # onboard pose (position, heading) in the site's estimated frame
     driven_m: float  # odometry distance from the previous site
+    leg_s: float = 0.0  # time since the previous site
+    odometry_cov_m2: np.ndarray | None = None  # (3, 3) world covariance of the leg reported by VO
     correction: Pose4 = field(default_factory=Pose4)  # estimated frame -> adjusted world frame
     at_addition: np.ndarray | None = None  # adjusted position right after this site was added (incremental)
 
     @property
+    def estimate_xyz_m(self) -> np.ndarray:
+        return self.estimate.t_m
+
+    @property
+    def adjusted(self) -> Pose4:
+        return self.correction.compose(self.estimate)
+
+    @property
     def adjusted_xyz_m(self) -> np.ndarray:
-        return self.correction.apply(self.estimate_xyz_m[None])[0]
+        return self.adjusted.t_m
+
+
+@dataclass(frozen=True)
+class _Edge:
+    """A measured relative pose ``Z = X_i^-1 o X_j`` of two sites (4-vector), its covariance and, for rock edges,
+    its sensitivity to the tie-point calibration terms."""
+
+    i: int
+    j: int
+    z: np.ndarray  # (4,)
+    cov: np.ndarray  # (4, 4)
+    kind: Literal["odometry", "rocks"]
+    d_z_d_bias: np.ndarray | None = None  # (4, n_bias)
 
 
 class SiteChain:
-    """Incremental adjustment of rover sites tied by matched rocks (the paper's incremental bundle adjustment).
+    """Incremental adjustment of rover sites tied by matched rocks (the paper's step "matched rocks become tie
+    points for incremental bundle adjustment of the rover positions"), as a weighted least-squares pose graph.
 
-    Unknowns: one :class:`Pose4` correction per site (its estimated frame to the adjusted world frame; the first
-    site is the datum, fixed at its operator-given pose) and one 3-D position per tie point (a rock matched
-    between sites). Observations, whitened by their sigmas:
+    Unknowns: the pose :class:`Pose4` (x, y, z, heading) of every site after the first (the datum, fixed at its
+    operator-given pose) and the tie points' systematic error terms. Observations, each whitened by its own
+    covariance:
 
-    * odometry: between consecutive sites the onboard estimate drifted by an unknown :class:`Pose4` ``D`` about
-      the previous site, with ``|D(e_k) - e_k|`` about ``odometry_sigma_frac`` of the distance driven and its yaw
-      about ``odometry_yaw_sigma_rad_per_m`` per metre;
-    * tie points: each rock position seen from site ``k``, moved back along its line of sight by the tie points'
-      common offset (``range_bias_terms``: the rock tops seen from one side sit a few centimetres off the true tops,
-      the same way at every site) and mapped by the site's correction, equals the tie point (covariance long along
-      the line of sight).
+    * odometry legs between consecutive sites: the onboard relative pose, with the covariance of
+      :class:`ChainParams` (VO's own step covariances, the gyro's heading drift);
+    * rock legs between every two sites within ``max_match_distance_m`` whose rocks match (:func:`match_rocks`): the
+      site-to-site transform from the matched rocks, with the covariance of its weighted least-squares fit scaled by
+      the variance factor of the match residuals (chi-square per degree of freedom). The transform depends on the
+      tie points' systematic errors (``range_bias_terms``): its derivative with respect to each is taken by
+      refitting the transform with the tie points shifted, so the terms are estimated with the poses. A common
+      offset along the lines of sight lengthens every leg the same way, a scale the odometry pins down.
 
-    :meth:`add_site` matches the new site with every earlier site within ``max_match_distance_m`` (estimated), merges
-    the matches into tie points (union-find) and re-solves the whole chain (``scipy.optimize.least_squares``).
+    Site frames are levelled (roll and pitch from the accelerometers at rest), so heading and translation are all
+    that differ between them. :meth:`add_site` matches the new site with every earlier site within
+    ``max_match_distance_m`` (estimated), merges the matches into tie points (union-find, for :meth:`tracks`) and
+    re-solves the whole chain.
     """
 
     def __init__(self, params: ChainParams = ChainParams()) -> None:
         self.params = params
         self.sites: list[ChainSite] = []
         self.matches: dict[tuple[int, int], SiteMatch] = {}
-        self.range_bias_m: tuple[float, ...] = ()  # estimated line-of-sight offset terms of the tie points
+        self.range_bias_m: tuple[float, ...] = ()  # estimated tie-point error terms (see ChainParams)
+        self._edges: list[_Edge] = []
         self._parent: dict[tuple[int, int], tuple[int, int]] = {}
 
     # -- building
-    def add_site(self, rocks: SiteRocks, estimate_xyz_m: np.ndarray, driven_m: float = 0.0) -> ChainSite:
+    def add_site(
+        self,
+        rocks: SiteRocks,
+        estimate_xyz_m: np.ndarray,
+        driven_m: float = 0.0,
+        estimate_yaw_rad: float = 0.0,
+        leg_s: float = 0.0,
+        odometry_cov_m2: np.ndarray | None = None,
+    ) -> ChainSite:
+        """Add the next site: its rocks, onboard pose and the leg from the previous site; match; re-solve."""
         k = len(self.sites)
-        site = ChainSite(rocks, np.asarray(estimate_xyz_m, dtype=float), float(driven_m))
+        estimate = Pose4(np.asarray(estimate_xyz_m, dtype=float).copy(), float(estimate_yaw_rad))
+        cov = None if odometry_cov_m2 is None else np.asarray(odometry_cov_m2, dtype=float)
+        site = ChainSite(rocks, estimate, float(driven_m), float(leg_s), cov)
         if k > 0:
             site.correction = self.sites[-1].correction  # odometry: no new drift until tie points say otherwise
+            self._edges.append(self._odometry_edge(self.sites[-1], site, k))
         self.sites.append(site)
         for j in range(k):
             prev = self.sites[j]
@@ -1229,11 +1296,77 @@ class SiteChain:
             m = match_rocks(prev.rocks, rocks, prior, self.params.match)
             if m.ok:
                 self.matches[(j, k)] = m
+                self._edges.append(self._rock_edge(j, k, m))
                 for ia, ib in m.pairs:
                     self._union((j, int(ia)), (k, int(ib)))
         self.solve()
         site.at_addition = site.adjusted_xyz_m.copy()
         return site
+
+    def _odometry_edge(self, a: ChainSite, b: ChainSite, k: int) -> _Edge:
+        """The onboard relative pose of consecutive sites and its covariance (see :class:`ChainParams`)."""
+        P = self.params
+        z = a.estimate.inverse().compose(b.estimate)
+        leg = z.t_m
+        if b.leg_s > 0:
+            hours = b.leg_s / 3600.0
+            sig_yaw = math.radians(
+                math.hypot(P.gyro_bias_instability_deg_h * hours, P.gyro_arw_deg_sqrt_h * math.sqrt(hours))
+            )
+        else:
+            sig_yaw = P.odometry_yaw_sigma_rad_per_m * max(b.driven_m, 1.0)
+        if b.odometry_cov_m2 is not None:
+            R = a.estimate.R  # world -> a's frame: the leg is measured in a's frame
+            c_t = R.T @ b.odometry_cov_m2 @ R
+        else:
+            c_t = (P.odometry_sigma_floor_m + P.odometry_sigma_frac * b.driven_m) ** 2 * np.eye(3)
+        length = float(np.hypot(leg[0], leg[1]))
+        u = leg / max(length, 1e-9) * np.array([1.0, 1.0, 0.0])
+        across = np.array([-u[1], u[0], 0.0])
+        lever = 0.5 * length  # a drift growing over the leg moves its end by half the leg times the final error
+        cov = np.zeros((4, 4))
+        cov[:3, :3] = c_t + (lever * sig_yaw) ** 2 * (np.outer(across, across) + np.diag([0.0, 0.0, 1.0]))
+        cov[3, 3] = sig_yaw**2
+        cov[:3, 3] = cov[3, :3] = lever * sig_yaw**2 * across
+        return _Edge(k - 1, k, z.as_vector(), cov, "odometry")
+
+    def _rock_edge(self, i: int, j: int, m: SiteMatch) -> _Edge:
+        """The relative pose the rock match gives, its covariance (scaled by the match residuals' variance factor)
+        and its derivative with respect to the tie-point error terms (by refitting with shifted tie points)."""
+        P = self.params
+        a, b = self.sites[i], self.sites[j]
+        pa = a.rocks.positions[m.pairs[:, 0]]
+        pb = b.rocks.positions[m.pairs[:, 1]]
+        ca = tie_point_covariances(pa, a.rocks.sensor_xyz_m, P.match)
+        cb = tie_point_covariances(pb, b.rocks.sensor_xyz_m, P.match)
+        cov_pairs = ca + np.einsum("ij,njk,lk->nil", m.transform.R, cb, m.transform.R)
+        res = pa - m.transform.apply(pb)
+        chi2 = float(np.einsum("ni,nij,nj->", res, np.linalg.inv(cov_pairs), res))
+        variance_factor = chi2 / max(3 * len(res) - 4, 1)
+
+        def relative(t: np.ndarray) -> np.ndarray:
+            z = a.estimate.inverse().compose(Pose4.from_vector(t)).compose(b.estimate).as_vector()
+            z[3] = _wrap(z[3])
+            return z
+
+        t0 = m.transform.as_vector()
+        z = relative(t0)
+        J = _numeric_jacobian(relative, t0, 1e-6)
+        cov = J @ (m.covariance * variance_factor) @ J.T
+        n_bias = P.range_bias_terms
+        G = np.zeros((4, n_bias))
+        for k in range(n_bias):
+            step = 0.01
+            theta = np.zeros(n_bias)
+            theta[k] = step
+            shifted = fit_pose4(
+                _remove_tie_bias(pa, a.rocks.sensor_xyz_m, theta),
+                _remove_tie_bias(pb, b.rocks.sensor_xyz_m, theta),
+                cov_pairs,
+                x0=m.transform,
+            )
+            G[:, k] = (relative(shifted.as_vector()) - z) / step
+        return _Edge(i, j, z, cov, "rocks", G)
 
     def _find(self, x: tuple[int, int]) -> tuple[int, int]:
         self._parent.setdefault(x, x)
@@ -1261,93 +1394,60 @@ class SiteChain:
 
     # -- solving
     def solve(self) -> None:
-        """Weighted least squares over all site corrections, tie points and the range bias (site 0 fixed).
+        """Weighted least squares over the site poses (site 0 fixed) and the tie-point error terms.
 
-        Parameters: 4 per site after the first, 3 per tie point, and ``range_bias_terms`` offset terms
-        ``b0 + b1 (r / 30 m) + ...`` (prior sigma ``range_bias_prior_m``): a tie point seen at range ``r`` is taken
-        as displaced by that much along its line of sight. ``b0`` is observable from rocks seen in different
-        directions; ``b1`` is a scale of every site's rock map, which only the odometry pins down. Sparse
-        finite-difference Jacobian.
+        Each edge's residual is the measured relative pose (a rock edge corrected by its derivative times the error
+        terms) minus the one the current poses give, whitened by the edge's covariance; the error terms carry a
+        prior of ``range_bias_prior_m``.
         """
-        from scipy.sparse import lil_matrix
-
         n = len(self.sites)
         if n < 2:
             return
         P = self.params
-        tracks = self.tracks()
-        positions = [site.rocks.positions for site in self.sites]
-        obs_s, obs_t, q, u, Wh = [], [], [], [], []
-        for t, track in enumerate(tracks):
-            for s, r in track:
-                site = self.sites[s]
-                p = positions[s][r]
-                los = p - site.rocks.sensor_xyz_m
-                cov = tie_point_covariances(p[None], site.rocks.sensor_xyz_m, P.match)[0]
-                obs_s.append(s)
-                obs_t.append(t)
-                q.append(p)
-                u.append(los / max(np.linalg.norm(los), 1e-9))
-                Wh.append(np.linalg.cholesky(np.linalg.inv(cov)).T)
-        n_obs, n_trk, n_site = len(obs_s), len(tracks), 4 * (n - 1)
-        n_bias = P.range_bias_terms if n_obs else 0
-        obs_s_a, obs_t_a = np.array(obs_s, dtype=int), np.array(obs_t, dtype=int)
-        q_a, u_a = np.array(q).reshape(-1, 3), np.array(u).reshape(-1, 3)
-        r_a = np.linalg.norm((q_a - np.array([self.sites[s].rocks.sensor_xyz_m for s in obs_s]).reshape(-1, 3))[:, :2],
-                             axis=1)  # fmt: skip
-        Wh_a = np.array(Wh).reshape(-1, 3, 3)
-        l0 = [self.sites[s].correction.apply(positions[s][r][None])[0] for s, r in
-              (track[0] for track in tracks)]  # fmt: skip
-        corrections = np.concatenate([self.sites[s].correction.as_vector() for s in range(1, n)])
-        x0 = np.concatenate([corrections, np.ravel(l0), np.zeros(n_bias)])
-        sig_t = np.array([P.odometry_sigma_floor_m + P.odometry_sigma_frac * s.driven_m for s in self.sites[1:]])
-        sig_y = np.array([P.odometry_yaw_sigma_rad_per_m * max(s.driven_m, 1.0) for s in self.sites[1:]])
-        est = np.array([s.estimate_xyz_m for s in self.sites])
+        n_bias = P.range_bias_terms if any(e.kind == "rocks" for e in self._edges) else 0
+        whiten = [np.linalg.cholesky(np.linalg.inv(e.cov)).T for e in self._edges]
+        datum = self.sites[0].adjusted
 
-        def site_params(x: np.ndarray) -> np.ndarray:
-            return np.vstack([np.zeros(4), x[:n_site].reshape(-1, 4)])  # site 0: the datum
+        def poses(x: np.ndarray) -> list[Pose4]:
+            return [datum] + [Pose4.from_vector(x[4 * k : 4 * k + 4]) for k in range(n - 1)]
 
         def residuals(x: np.ndarray) -> np.ndarray:
-            sp = site_params(x)
+            X = poses(x)
+            bias = x[4 * (n - 1) :]
             out = []
-            for k in range(1, n):  # odometry
-                D = Pose4.from_vector(sp[k - 1]).inverse().compose(Pose4.from_vector(sp[k]))
-                out.append((D.apply(est[k][None])[0] - est[k]) / sig_t[k - 1])
-                out.append([D.yaw_rad / sig_y[k - 1]])
-            if n_obs:  # tie points
-                bias = x[n_site + 3 * n_trk :]
-                shift = np.zeros(n_obs)
-                for k in range(n_bias):  # b0 + b1 (r / 30 m) + ...
-                    shift = shift + bias[k] * (r_a / 30.0) ** k
-                qc = q_a - shift[:, None] * u_a
-                yaw = sp[obs_s_a, 3]
-                c, s_ = np.cos(yaw), np.sin(yaw)
-                world = np.column_stack([c * qc[:, 0] - s_ * qc[:, 1], s_ * qc[:, 0] + c * qc[:, 1], qc[:, 2]])
-                world += sp[obs_s_a, :3]
-                L = x[n_site : n_site + 3 * n_trk].reshape(-1, 3)[obs_t_a]
-                out.append(np.einsum("nij,nj->ni", Wh_a, world - L).ravel())
-                out.append(bias / P.range_bias_prior_m)
-            return np.concatenate([np.ravel(o) for o in out])
+            for e, W in zip(self._edges, whiten, strict=True):
+                z = e.z if e.d_z_d_bias is None or not n_bias else e.z + e.d_z_d_bias[:, :n_bias] @ bias
+                r = X[e.i].inverse().compose(X[e.j]).as_vector() - z
+                r[3] = _wrap(r[3])
+                out.append(W @ r)
+            out.append(bias / P.range_bias_prior_m)
+            return np.concatenate(out)
 
-        n_res = 4 * (n - 1) + 3 * n_obs + n_bias
-        sparsity = lil_matrix((n_res, len(x0)), dtype=int)
+        x0 = np.concatenate([s.adjusted.as_vector() for s in self.sites[1:]] + [np.zeros(n_bias)])
+        res = least_squares(residuals, x0, method="trf", x_scale="jac", max_nfev=200)
+        X = poses(res.x)
         for k in range(1, n):
-            rows = slice(4 * (k - 1), 4 * k)
-            for s in (k - 1, k):
-                if s > 0:
-                    sparsity[rows, 4 * (s - 1) : 4 * s] = 1
-        for i in range(n_obs):
-            rows = slice(4 * (n - 1) + 3 * i, 4 * (n - 1) + 3 * i + 3)
-            if obs_s_a[i] > 0:
-                sparsity[rows, 4 * (obs_s_a[i] - 1) : 4 * obs_s_a[i]] = 1
-            t0 = n_site + 3 * obs_t_a[i]
-            sparsity[rows, t0 : t0 + 3] = 1
-            if n_bias:
-                sparsity[rows, len(x0) - n_bias :] = 1
-        for k in range(n_bias):
-            sparsity[n_res - n_bias + k, len(x0) - n_bias + k] = 1
-        res = least_squares(residuals, x0, jac_sparsity=sparsity, method="trf", x_scale="jac", max_nfev=100)
-        sp = site_params(res.x)
-        for k in range(1, n):
-            self.sites[k].correction = Pose4.from_vector(sp[k])
-        self.range_bias_m = tuple(float(b) for b in res.x[len(x0) - n_bias :])
+            self.sites[k].correction = X[k].compose(self.sites[k].estimate.inverse())
+        self.range_bias_m = tuple(float(b) for b in res.x[4 * (n - 1) :])
+
+
+def _remove_tie_bias(points: np.ndarray, sensor_xyz: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Tie points with their systematic errors taken out: ``theta[0]`` along the line of sight (a rock seen too far
+    by that much), ``theta[1]`` in height per 30 m of range (rock tops seen too high)."""
+    p = np.array(points, dtype=float)
+    ray = p - np.asarray(sensor_xyz, dtype=float)
+    if len(theta) > 0:
+        p -= theta[0] * ray / np.maximum(np.linalg.norm(ray, axis=1), 1e-9)[:, None]
+    if len(theta) > 1:
+        p[:, 2] -= theta[1] * np.hypot(ray[:, 0], ray[:, 1]) / 30.0
+    return p
+
+
+def _numeric_jacobian(f, x: np.ndarray, eps: float) -> np.ndarray:  # noqa: ANN001
+    f0 = f(x)
+    J = np.zeros((len(f0), len(x)))
+    for k in range(len(x)):
+        d = np.zeros(len(x))
+        d[k] = eps
+        J[:, k] = (f(x + d) - f(x - d)) / (2.0 * eps)
+    return J

@@ -3,7 +3,9 @@
 The pipeline object (:class:`RockSiteSurvey`) owns a :class:`rover_sim.runner.Mission` (terrain, physics, sensors,
 dead reckoning, VO) and a high-resolution navcam renderer; the algorithms in :mod:`nav.rocks` know none of them.
 A scenario's sites are its start pose plus the end of every ``goto`` command (``scenarios/rock_localization.toml``):
-the rover drives to each with the runner's VO-corrected goto, stops, and takes a panorama:
+the rover drives to each with the runner's VO-corrected goto, stops, stands for ``REST_BEFORE_PANORAMA_S`` (the dead
+reckoner re-levels roll and pitch from the accelerometers at rest, so the site frame is level: the paper's site frames
+differ by heading and translation only) and takes a panorama:
 
 1. the mast sweeps the navcam pair in pan (``pan_step_deg``) at each ``elevations_deg``; every pair is rendered at
    ``resolution_px`` and matched by :func:`nav.rocks.panorama_points` (binned near field, full-resolution far field);
@@ -13,9 +15,11 @@ the rover drives to each with the runner's VO-corrected goto, stops, and takes a
 3. :func:`nav.rocks.extract_rocks` extracts and models the rocks.
 
 The chain of sites is then adjusted by :class:`nav.rocks.SiteChain`: matches between every two sites within 26 m
-(estimated) become tie points. Ground truth (the terrain's rock list, the simulator's rover pose) is used only by the
-``evaluate_*`` functions below: to map a site's estimated frame onto the true world (truth pose composed with the
-inverse onboard pose) and to associate extracted rocks with the generated ones.
+(estimated) give site-to-site transforms, fused with the odometry legs, each weighted by its own covariance; a leg's
+is the sum of the covariances VO reports for its steps (the survey wraps the mission's VO step to collect them) plus
+the gyro's heading drift over the leg's duration. Ground truth (the terrain's rock list, the simulator's rover pose)
+is used only by the ``evaluate_*`` functions below: to map a site's estimated frame onto the true world (truth pose
+composed with the inverse onboard pose) and to associate extracted rocks with the generated ones.
 
 Dead reckoning and VO estimates come from the same drive: the runner keeps a pure wheel/IMU dead reckoner beside
 the onboard (VO-corrected) one, so both are measured, not simulated.
@@ -52,6 +56,9 @@ from terrains import Rock, Terrain
 
 ROVER_BOX_HALF_M = (1.2, 1.45)  # rover-frame |x|, |y| of the rover's own body, wings and wheels: points cut out
 MAST_SETTLE_S = 1.5  # mast servo settling after a pan step (it tracks to ~1e-5 rad in 2 s)
+REST_BEFORE_PANORAMA_S = 3.0  # the rover stands this long after a drive: the suspension settles and the dead
+# reckoner re-levels roll and pitch from the accelerometers (at rest) before the panorama is mapped through its pose
+VO_FAILED_STEP_SIGMA_FRAC = 0.1  # a step VO did not correct is the wheel odometry's: this fraction of its length
 
 
 @dataclass(frozen=True)
@@ -85,6 +92,8 @@ class SiteSurvey:
     n_points: int
     timings_s: dict[str, float] = field(default_factory=dict)
     points: np.ndarray | None = None  # (N, 3) onboard frame, kept only with keep_points
+    leg_s: float = 0.0  # time since the previous site (the gyro's heading drift grows with it)
+    odometry_cov_m2: np.ndarray | None = None  # (3, 3) world covariance VO itself reports for the leg (its steps)
 
     def site_rocks(self) -> SiteRocks:
         return SiteRocks(self.rocks, self.sensor_xyz_m)
@@ -129,6 +138,29 @@ class RockSiteSurvey:
         self.build_s = time.perf_counter() - t0
         self.sites: list[SiteSurvey] = []
         self._last_distance_m = 0.0
+        self._last_t_s = 0.0
+        self._leg_cov = np.zeros((3, 3))
+        if self.mission.vo is not None:
+            self.mission.vo.step = self._vo_step_with_covariance(self.mission.vo.step)
+
+    def _vo_step_with_covariance(self, step: Callable) -> Callable:
+        """Wrap the mission's VO step: sum, over the leg, the position covariance VO reports for every step it
+        accepts (rotated into the world by the attitude at the previous pair), and the wheel odometry's for a step it
+        refuses. The chain adjustment weighs the leg by it (VO's own error model, not the truth)."""
+
+        def wrapped(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+            res = step(*args, **kwargs)
+            R = kwargs.get("R_world_rover")
+            R = np.eye(3) if R is None else np.asarray(R, dtype=float)
+            if res.ok and res.covariance is not None:
+                self._leg_cov += R @ np.asarray(res.covariance)[:3, :3] @ R.T
+            elif res.status != "first_frame":
+                pred = args[3] if len(args) > 3 else kwargs.get("predicted_motion_rover")
+                d = 0.0 if pred is None else float(np.linalg.norm(np.asarray(pred)[:3, 3]))
+                self._leg_cov += (VO_FAILED_STEP_SIGMA_FRAC * d) ** 2 * np.eye(3)
+            return res
+
+        return wrapped
 
     @property
     def terrain(self) -> Terrain:
@@ -168,6 +200,7 @@ class RockSiteSurvey:
         m, cfg = self.mission, self.config
         timings = {"drive": drive_s, "render": 0.0, "stereo": 0.0}
         sim = m.sim
+        self._stand(REST_BEFORE_PANORAMA_S)
         T_onboard = m.onboard.pose.as_matrix()  # the panorama is mapped through this estimate
         T_dr = m.dr.pose.as_matrix()
         T_true = np.eye(4)  # evaluation only
@@ -203,6 +236,8 @@ class RockSiteSurvey:
             T_world_rover_dr=T_dr,
             T_world_rover_onboard=T_onboard,
             driven_m=m.onboard.distance_m - self._last_distance_m,
+            leg_s=sim.time_s - self._last_t_s,
+            odometry_cov_m2=self._leg_cov.copy(),
             sensor_xyz_m=sensor,
             rocks=rocks,
             n_points=len(cloud),
@@ -210,6 +245,8 @@ class RockSiteSurvey:
             points=cloud if self.keep_points else None,
         )
         self._last_distance_m = m.onboard.distance_m
+        self._last_t_s = sim.time_s
+        self._leg_cov = np.zeros((3, 3))
         self.sites.append(site)
         self.progress(f"site {site.index}: {len(rocks)} rocks from {len(cloud)} points")
         return site
@@ -218,6 +255,13 @@ class RockSiteSurvey:
         n = max(1, int(round(360.0 / self.config.pan_step_deg)))
         step = 360.0 / n
         return [-180.0 + step * (k + 0.5) for k in range(n)]
+
+    def _stand(self, duration_s: float) -> None:
+        """Let the rover stand still (wheels idle) for ``duration_s``; the onboard estimators keep running."""
+        m = self.mission
+        for _ in range(int(round(duration_s / TICK_S))):
+            m.sim.step(None, int(round(TICK_S / m.sim.timestep_s)))
+            m._tick(m.sim)
 
     def _point_mast(self, pan_deg: float, elevation_deg: float) -> None:
         """Point the navcams (elevation: up positive; the tilt joint is its negative) and let the mast settle."""
@@ -234,10 +278,13 @@ class RockSiteSurvey:
 
 
 def adjust_chain(sites: list[SiteSurvey], params: ChainParams = ChainParams()) -> SiteChain:
-    """Feed the sites, in order, to an incremental :class:`nav.rocks.SiteChain` (onboard estimates only)."""
+    """Feed the sites, in order, to an incremental :class:`nav.rocks.SiteChain`: onboard poses, the legs' durations
+    and VO's own covariances only (no truth)."""
     chain = SiteChain(params)
     for s in sites:
-        chain.add_site(s.site_rocks(), s.T_world_rover_onboard[:3, 3], s.driven_m)
+        T = s.T_world_rover_onboard
+        yaw = math.atan2(T[1, 0], T[0, 0])
+        chain.add_site(s.site_rocks(), T[:3, 3], s.driven_m, yaw, s.leg_s, s.odometry_cov_m2)
     return chain
 
 

@@ -11,7 +11,8 @@ terrain's rock list and the simulator's true poses:
 * modelling: median model RMS and model-type agreement of those rocks;
 * matching: fraction of matches between the same generated rock, over all site pairs up to 26 m apart, and the
   site-to-site position error in % of the separation (worst pair);
-* chain: mean position error over the sites after the first, dead reckoning vs VO vs adjusted.
+* chain: mean position error over the sites after the first, dead reckoning vs VO vs adjusted (the pose-graph
+  fusion of the VO legs and the rock transforms, :class:`nav.rocks.SiteChain`).
 """
 
 from __future__ import annotations

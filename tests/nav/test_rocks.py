@@ -424,25 +424,36 @@ def test_match_rocks_rejects_unrelated_sites() -> None:
 # ---------------------------------------------------------------------------------------------- step 6: chain
 
 
-def drive_chain(params: ChainParams, offset_m: float = 0.0) -> tuple[SiteChain, list[float], list[float]]:
-    """Seven sites 15 m apart on a 900-rock field; the onboard estimate picks up 5 % position and 0.5 deg heading
-    error per leg. Returns the chain and the odometry and adjusted position errors per site."""
+def drive_chain(
+    params: ChainParams,
+    offset_m: float = 0.0,
+    leg_sigma_m: float | None = None,
+    yaw_sigma_deg: float = 0.5,
+) -> tuple[SiteChain, list[float], list[float]]:
+    """Seven sites 15 m apart on a 900-rock field, the rover heading along x. Each onboard leg (the relative pose
+    of consecutive sites) is off by a position error (5 % of the leg, or ``leg_sigma_m`` per axis, then also passed
+    as the leg's covariance) and a heading error of ``yaw_sigma_deg`` grown over the leg (so the leg's end also
+    moves across by half the leg times it). Returns the chain and the odometry and adjusted errors per site."""
     field = rock_field(900, 75.0, seed=8)
     true_xy = [(-50.0 + 15.0 * k, 4.0 * (-1) ** k) for k in range(7)]
     rng = np.random.default_rng(9)
-    drift = Pose4()
     chain = SiteChain(params)
     odo_err = []
+    est = Pose4(np.array([*true_xy[0], 0.0]), 0.0)
     for k, xy in enumerate(true_xy):
+        true = Pose4(np.array([*xy, 0.0]), 0.0)
         driven = 0.0 if k == 0 else math.dist(xy, true_xy[k - 1])
+        sigma = 0.05 * driven if leg_sigma_m is None else leg_sigma_m
         if k:
-            step = Pose4(np.r_[rng.normal(0, 0.05 * driven, 2), 0.0], rng.normal(0, math.radians(0.5)))
-            drift = Pose4(step.t_m + drift.t_m, drift.yaw_rad + step.yaw_rad)
-        to_est = drift.inverse()
+            leg = Pose4(np.array([*true_xy[k - 1], 0.0]), 0.0).inverse().compose(true)
+            dyaw = rng.normal(0, math.radians(yaw_sigma_deg))
+            t = Pose4(np.zeros(3), 0.5 * dyaw).apply(leg.t_m[None])[0] + np.r_[rng.normal(0, sigma, 2), 0.0]
+            est = est.compose(Pose4(t, leg.yaw_rad + dyaw))
+        to_est = est.compose(true.inverse())  # true world -> this site's estimated frame
         site = observe(field, xy, to_est, seed=20 + k, offset_m=offset_m)
-        est_xyz = to_est.apply(np.array([[*xy, 0.0]]))[0]
-        chain.add_site(site, est_xyz, driven)
-        odo_err.append(float(np.linalg.norm(est_xyz[:2] - xy)))
+        cov = None if leg_sigma_m is None else np.diag([sigma**2, sigma**2, 1e-4])
+        chain.add_site(site, est.t_m, driven, estimate_yaw_rad=est.yaw_rad, odometry_cov_m2=cov)
+        odo_err.append(float(np.linalg.norm(est.t_m[:2] - xy)))
     adj_err = [float(np.linalg.norm(s.adjusted_xyz_m[:2] - xy)) for s, xy in zip(chain.sites, true_xy, strict=True)]
     return chain, odo_err, adj_err
 
@@ -455,11 +466,38 @@ def test_chain_adjustment_beats_the_drifting_odometry() -> None:
     assert all(s.at_addition is not None for s in chain.sites)
 
 
+def test_chain_fuses_good_odometry_with_rocks() -> None:
+    """VO-like legs (1 cm per axis, covariance given) whose heading drifts 0.3 deg per leg (the gyro): the rocks
+    take the heading drift out, and the fused positions beat the odometry's clearly."""
+    P = ChainParams(odometry_yaw_sigma_rad_per_m=math.radians(0.3) / 15.0)
+    chain, odo_err, fused = drive_chain(P, leg_sigma_m=0.01, yaw_sigma_deg=0.3)
+    assert len(chain.matches) == 6  # consecutive sites only (the others are over 26 m apart)
+    assert np.mean(fused[1:]) < 0.7 * np.mean(odo_err[1:])
+
+
 def test_chain_calibrates_a_line_of_sight_offset_of_the_tie_points() -> None:
-    """Tie points seen 8 cm too far along every line of sight stretch every leg; the calibrated offset takes most
-    of that out. (The offset is only partly observable: rocks between two sites are seen in nearly opposite
-    directions, where an offset looks like a longer leg.)"""
-    _, _, plain = drive_chain(ChainParams(odometry_sigma_frac=0.05, range_bias_terms=0), offset_m=0.08)
-    chain, _, calibrated = drive_chain(ChainParams(odometry_sigma_frac=0.05, range_bias_terms=1), offset_m=0.08)
-    assert 0.03 < chain.range_bias_m[0] < 0.1
+    """Tie points seen 8 cm too far along every line of sight lengthen every rock leg by about 16 cm; with VO-like
+    odometry (1 cm per leg) the offset is calibrated against the leg lengths and taken out. (Rocks alone cannot
+    tell it from longer legs when only consecutive sites match, as here: the odometry pins it.)"""
+    P = ChainParams(odometry_yaw_sigma_rad_per_m=math.radians(0.3) / 15.0, range_bias_terms=1)
+    _, _, plain = drive_chain(replace(P, range_bias_terms=0), offset_m=0.08, leg_sigma_m=0.01, yaw_sigma_deg=0.3)
+    chain, _, calibrated = drive_chain(P, offset_m=0.08, leg_sigma_m=0.01, yaw_sigma_deg=0.3)
+    assert 0.05 < chain.range_bias_m[0] < 0.11
     assert np.mean(calibrated[1:]) < 0.6 * np.mean(plain[1:])
+
+
+@pytest.mark.parametrize("phase_m", np.arange(0.0, 0.1, 0.0125).round(4).tolist())
+def test_a_pointed_rock_peaks_at_its_apex_whatever_the_grid_phase(phase_m: float) -> None:
+    """A narrow cone (21 cm tall, 40 cm across) seen from one side (its far half and the ground it hides have no
+    points): the apex cell stands far above its neighbours, so the median-of-neighbours support can peak next to it
+    and the window's height range taken from that support falls below 10 cm. The peak is the apex and the range
+    the window's highest point above its lowest, wherever the 10 cm grid cells fall."""
+    g = np.arange(-1.5, 1.5, 0.02) + phase_m
+    x, y = np.meshgrid(g, g)
+    z = np.maximum(0.0, 0.21 * (1.0 - np.hypot(x, y) / 0.2)) + np.random.default_rng(0).normal(0.0, 0.003, x.shape)
+    seen = ~((x > 0) & (z > 0.005)) & ~((x > 0) & (x < 0.8) & (np.abs(y) < 0.2))  # cameras far off along -x
+    pts = np.column_stack([x[seen], y[seen], z[seen]])
+    peaks = [pk for pk in extract_peaks(pts) if np.hypot(*pk.xyz_m[:2]) < 0.3]
+    assert peaks and max(pk.xyz_m[2] for pk in peaks) > 0.17
+    rocks = extract_rocks(pts)
+    assert len(rocks) == 1 and rocks[0].height_m == pytest.approx(0.21, abs=0.04)

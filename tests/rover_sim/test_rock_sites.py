@@ -163,7 +163,8 @@ def test_one_site_panorama_finds_the_rocks_through_the_onboard_pose() -> None:
         site = sv.survey_site()
         terrain = sv.terrain
     assert site.n_points > 10_000
-    assert np.allclose(site.T_world_rover_onboard[:3, 3], site.T_world_rover_true[:3, 3] + shift)
+    # the rover settles by a few millimetres while it stands before the panorama; the estimate does not follow
+    assert np.allclose(site.T_world_rover_onboard[:3, 3], site.T_world_rover_true[:3, 3] + shift, atol=0.01)
     assert len(site.rocks) == 4
     for rock in terrain.rocks:
         d = [np.linalg.norm(r.model.centre_xyz_m[:2] - shift[:2] - [rock.x_m, rock.y_m]) for r in site.rocks]
@@ -191,6 +192,4 @@ def test_bench_rocks_meets_the_acceptance(tmp_path) -> None:
     assert result["match_correct_frac"] >= ACCEPT["match_correct_frac"]
     assert result["site_error_pct"] <= ACCEPT["site_error_pct"]
     chain = result["chain_error_m"]
-    assert chain["adjusted"] < chain["dead_reckoning"]
-    if chain["adjusted"] >= chain["vo"]:
-        pytest.xfail(f"adjusted chain {chain['adjusted']:.3f} m does not beat this simulator's VO {chain['vo']:.3f} m")
+    assert chain["adjusted"] < min(chain["dead_reckoning"], chain["vo"])
