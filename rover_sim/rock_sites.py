@@ -46,6 +46,7 @@ from nav.rocks import (
     SiteMatch,
     SiteRocks,
     extract_rocks,
+    observation_quality,
     panorama_points,
     voxel_downsample,
 )
@@ -308,6 +309,8 @@ class ExtractionEval:
     type_match: list[bool]  # chosen model type == generating shape, same rocks
     range_m: list[float]  # their range
     missed: list[tuple[str, float, float]]  # (shape, height, range) of the generated rocks not found
+    shapes: list[tuple[str, str]] = field(default_factory=list)  # (generating shape, chosen model), same rocks
+    well_observed: list[bool] = field(default_factory=list)  # nav.rocks.RockObservation.well_observed, same rocks
 
     @property
     def recall(self) -> float:
@@ -327,6 +330,8 @@ class ExtractionEval:
             self.type_match + other.type_match,
             self.range_m + other.range_m,
             self.missed + other.missed,
+            self.shapes + other.shapes,
+            self.well_observed + other.well_observed,
         )
 
 
@@ -363,10 +368,15 @@ def associate(site: SiteSurvey, truth: list[Rock]) -> np.ndarray:
 
 
 def evaluate_extraction(
-    site: SiteSurvey, terrain: Terrain, max_range_m: float = 30.0, min_height_m: float = 0.2
+    site: SiteSurvey,
+    terrain: Terrain,
+    max_range_m: float = 30.0,
+    min_height_m: float = 0.2,
+    rocks_params: RockParams = RockParams(),
 ) -> ExtractionEval:
     """Recall (generated rocks taller than ``min_height_m`` within ``max_range_m`` of the site), precision
-    (extracted rocks within ``max_range_m`` that are a generated rock), model RMS and type agreement."""
+    (extracted rocks within ``max_range_m`` that are a generated rock), model RMS and type agreement (with the
+    estimator's own judgement of whether each rock was well observed, :func:`nav.rocks.observation_quality`)."""
     truth = terrain.rocks
     idx = associate(site, truth)
     cam = site.T_world_rover_true[:2, 3]
@@ -376,12 +386,15 @@ def evaluate_extraction(
     est = rocks_in_true_frame(site)
     e_range = np.linalg.norm(est[:, :2] - cam, axis=1) if len(est) else np.zeros(0)
     in_range = e_range <= max_range_m
-    rms, types, ranges = [], [], []
+    rms, types, ranges, shapes, well = [], [], [], [], []
     for k, i in enumerate(idx):
         if i >= 0 and target[i]:
-            rms.append(site.rocks[k].model.rms_m)
-            types.append(site.rocks[k].model.shape == truth[i].shape)
+            rock = site.rocks[k]
+            rms.append(rock.model.rms_m)
+            types.append(rock.model.shape == truth[i].shape)
             ranges.append(float(t_range[i]))
+            shapes.append((truth[i].shape, rock.model.shape))
+            well.append(observation_quality(rock, site.sensor_xyz_m, rocks_params).well_observed(rocks_params))
     missed = [
         (truth[i].shape, truth[i].height_m, float(t_range[i]))
         for i in np.flatnonzero(target)
@@ -396,6 +409,8 @@ def evaluate_extraction(
         type_match=types,
         range_m=ranges,
         missed=missed,
+        shapes=shapes,
+        well_observed=well,
     )
 
 

@@ -88,6 +88,8 @@ def test_evaluate_extraction_counts_against_the_rock_list(eval_terrain) -> None:
     assert e.n_extracted == 4 and e.n_correct == 3  # r0, r1, r3 right; the extra one false
     assert sorted(h for _, h, _ in e.missed) == [0.35, 0.4]
     assert all(e.type_match)
+    assert len(e.shapes) == len(e.well_observed) == len(e.type_match) == 2
+    assert all(true == chosen for true, chosen in e.shapes)
 
 
 def test_evaluate_match_measures_site_to_site_error(eval_terrain) -> None:
@@ -185,11 +187,13 @@ def test_bench_rocks_meets_the_acceptance(tmp_path) -> None:
 
     result = bench_rocks(str(tmp_path / "rocks.json"))
     written = json.loads((tmp_path / "rocks.json").read_text())
-    assert written.keys() >= {"recall", "precision", "median_rms_m", "match_correct_frac", "site_error_pct"}
+    assert written.keys() >= {"recall", "precision", "median_rms_m", "match_correct_frac", "site_error_pct",
+                              "model_type_match_frac", "model_type_match_frac_well_observed"}  # fmt: skip
     assert written["chain_error_m"].keys() == {"dead_reckoning", "vo", "adjusted"}
     assert result["recall"] >= ACCEPT["recall"] and result["precision"] >= ACCEPT["precision"]
     assert result["median_rms_m"] <= ACCEPT["median_rms_m"]
     assert result["match_correct_frac"] >= ACCEPT["match_correct_frac"]
     assert result["site_error_pct"] <= ACCEPT["site_error_pct"]
+    assert result["model_type_match_frac_well_observed"] >= ACCEPT["model_type_match_frac_well_observed"]
     chain = result["chain_error_m"]
     assert chain["adjusted"] < min(chain["dead_reckoning"], chain["vo"])
