@@ -55,10 +55,16 @@ ACCEPT = {
 }
 
 
-def bench_rocks(json_path: str | None = None, scenario: str = SCENARIO, config: SurveyConfig = SurveyConfig()) -> dict:
-    """Run the survey, print the markdown tables, write ``json_path`` (if given) and return the results."""
+def bench_rocks(
+    json_path: str | None = None,
+    scenario: str = SCENARIO,
+    config: SurveyConfig = SurveyConfig(),
+    seed: int | None = None,
+) -> dict:
+    """Run the survey, print the markdown tables, write ``json_path`` (if given) and return the results.
+    ``seed`` replaces the scenario's (another rock field along the same legs: a held-out check)."""
     t0 = time.perf_counter()
-    sc = load_scenario(scenario)
+    sc = load_scenario(scenario, seed=seed)
 
     def progress(msg: str) -> None:
         print(f"  [{time.perf_counter() - t0:6.0f} s] {msg}", flush=True)
