@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from rover_sim.bench import write_json
-from rover_sim.runner import run_scenario
-from rover_sim.scenario import scenario_from_dict
+from rover_sim.mission.pipeline import run_scenario
+from rover_sim.mission.scenario import scenario_from_dict
 
 GOAL_DISTANCE_M = 20.0
 REACH_M = 1.0
@@ -40,7 +40,7 @@ def field_scenario(seed: int, cover: float = 0.10, max_height_m: float = 0.6) ->
             "material": {"kind": "patches", "bedrock_fraction": 0.2, "mixed_fraction": 0.3, "patch_scale_m": 3.0},
         },
         "start": {"x_m": x0, "y_m": 0, "yaw_deg": 0},
-        # GESTALT ranges with the front hazcams (rover_sim.autonav); VO, which keeps the onboard pose honest on the
+        # GESTALT ranges with the front hazcams (mission.autonav); VO, which keeps the onboard pose honest on the
         # sandy patches (5-10 % slip), uses the navcams as on MER
         "nav": {"vo": True, "camera": "navcam", "image_noise": True},
         "commands": [{"type": "autonav", "x_m": x1, "y_m": 0, "tolerance_m": 0.6, "max_cycles": 150}],
@@ -86,7 +86,7 @@ def _rows(seeds: list[int], workers: int):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from rover_sim.sweep import init_worker
+    from rover_sim.mission.sweep import init_worker
 
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=min(workers, len(seeds)), mp_context=ctx, initializer=init_worker) as pool:

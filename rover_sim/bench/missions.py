@@ -12,10 +12,11 @@ import math
 from pathlib import Path
 
 from rover_sim.bench import write_json
-from rover_sim.runner import Metrics, run_scenario
-from rover_sim.scenario import catalogue, load_scenario
+from rover_sim.mission.pipeline import Metrics, run_scenario
+from rover_sim.mission.scenario import catalogue, load_scenario
+from rover_sim.resources import suite_baseline_path
 
-BASELINE = Path(__file__).resolve().parents[2] / "benchmarks" / "suite_baseline.json"
+BASELINE = suite_baseline_path()
 # regression tolerances against the baseline
 VO_ERROR_SLACK_PCT = 0.5  # VO error may grow by this many percentage points (absolute)
 CONVERGENCE_SLACK_PCT = 5.0  # VO convergence may drop by this many points

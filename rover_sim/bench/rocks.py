@@ -3,7 +3,7 @@
 The rover starts at the first site and drives to the others with the runner's VO-corrected goto (dead reckoning and
 VO are both measured on this drive: the runner keeps a wheel/IMU dead reckoner beside the VO-corrected one). At
 every site it takes a navcam stereo panorama; rocks are extracted and modelled, matched between every two sites up to
-26 m apart, and the chain of sites is adjusted (:mod:`rover_sim.rock_sites`, :mod:`nav.rocks`). Figures against the
+26 m apart, and the chain of sites is adjusted (:mod:`rover_sim.mission.survey`, :mod:`nav.rocks`). Figures against the
 terrain's rock list and the simulator's true poses:
 
 * extraction: recall of generated rocks taller than 20 cm within 30 m of each site, precision of the extracted
@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from nav.rocks import ROCK_SHAPES
-from rover_sim.rock_sites import (
+from rover_sim.mission.scenario import load_scenario
+from rover_sim.mission.survey import (
     ExtractionEval,
     MatchEval,
     RockSiteSurvey,
@@ -41,7 +42,6 @@ from rover_sim.rock_sites import (
     evaluate_extraction,
     evaluate_match,
 )
-from rover_sim.scenario import load_scenario
 
 SCENARIO = "rock_localization"
 MAX_MATCH_SEPARATION_M = 26.0

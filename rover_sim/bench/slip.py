@@ -16,8 +16,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rover_sim.bench import write_json
-from rover_sim.drive import MAX_WHEEL_SPEED_M_S, TICK_S, Straight, execute
-from rover_sim.physics import RoverSim
+from rover_sim.sim.drive import MAX_WHEEL_SPEED_M_S, TICK_S, Straight, execute
+from rover_sim.sim.physics import RoverSim
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
 
 SLOPES_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)

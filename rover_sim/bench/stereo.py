@@ -16,8 +16,8 @@ import numpy as np
 from nav.camera import StereoRig
 from nav.stereo import StereoParams, compute_disparity, stereobm_baseline
 from rover_sim.bench import write_json
-from rover_sim.physics import RoverSim
-from rover_sim.render import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+from rover_sim.sim.physics import RoverSim
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, TerrainRecipe, synthesize
 
 MAX_RANGE_M = 3.0

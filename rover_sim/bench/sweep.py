@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from rover_sim.bench import write_json
-from rover_sim.sweep import SweepResult, default_workers, run_sweep
+from rover_sim.mission.sweep import SweepResult, default_workers, run_sweep
 
 GRID = ("terrain.slope.slope_deg=0,5,10,15", "terrain.material.kind=sand,bedrock")
 ACCEPT_RATIO = 0.65
@@ -97,7 +97,7 @@ def bench_sweep(
     json_path: str | None = None, workers: int = 2, drive_m: float = DRIVE_M, out_root: Path | None = None
 ) -> dict:
     """Serial vs ``workers``-process sweep of 8 short jobs; prints a markdown table and returns (and writes) a dict."""
-    import rover_sim.runner  # noqa: F401  (imported before timing: the serial run starts warm)
+    import rover_sim.mission.pipeline  # noqa: F401  (imported before timing: the serial run starts warm)
 
     with tempfile.TemporaryDirectory(prefix="bench_sweep_") as tmp:
         root = Path(out_root) if out_root is not None else Path(tmp)

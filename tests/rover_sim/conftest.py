@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
-from rover_sim.cameras import camera_world_pose, stereo_rig
-from rover_sim.physics import RoverSim
-from rover_sim.sensors import point_mast
-from rover_sim.world import Sun
+from rover_sim.render.cameras import camera_world_pose, stereo_rig
+from rover_sim.sim.physics import RoverSim
+from rover_sim.sim.sensors import point_mast
+from rover_sim.sim.world import Sun
 from terrains import (
     ExplicitRockSpec,
     RockSpec,
@@ -103,7 +103,7 @@ def render_world() -> MarkedWorld:
 @pytest.fixture(scope="session")
 def render_renderer(render_world):
     """The default navigation renderer (direct 256x256, shadows) on the shared world."""
-    from rover_sim.render import StereoRenderer
+    from rover_sim.render.renderer import StereoRenderer
 
     r = StereoRenderer(render_world.sim)
     yield r

@@ -9,7 +9,7 @@ import pytest
 
 import rover_sim  # noqa: F401
 from nav.camera import StereoRig
-from rover_sim.cameras import (
+from rover_sim.render.cameras import (
     STEREO_PAIRS,
     StereoRigNotRectified,
     camera_model,
@@ -18,7 +18,7 @@ from rover_sim.cameras import (
     save_rig,
     stereo_rig,
 )
-from rover_sim.sensors import point_mast
+from rover_sim.sim.sensors import point_mast
 
 BASELINES_M = {"navcam": 0.20, "hazcam_front": 0.10, "hazcam_rear": 0.10}  # REFERENCE.md section 1
 FOVY_DEG = {"navcam": 45.0, "hazcam_front": 124.0, "hazcam_rear": 124.0}

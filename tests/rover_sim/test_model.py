@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import rover_sim  # noqa: F401
-from rover_sim.drive import Straight, execute
 from rover_sim.errors import PhysicsDiverged
-from rover_sim.physics import RoverSim
-from rover_sim.world import ROVER_XML, SCENE_XML
+from rover_sim.sim.drive import Straight, execute
+from rover_sim.sim.physics import RoverSim
+from rover_sim.sim.world import ROVER_XML, SCENE_XML
 from terrains import (
     ExplicitRockSpec,
     MaterialSpec,

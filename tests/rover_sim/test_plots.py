@@ -9,7 +9,7 @@ import pytest
 from matplotlib.collections import PolyCollection
 from matplotlib.patches import Circle
 
-from rover_sim.plots import DESIGN_LINE_GID, plot_error_vs_distance, plot_paths, plot_slip
+from rover_sim.io.plots import DESIGN_LINE_GID, plot_error_vs_distance, plot_paths, plot_slip
 from terrains import ExplicitRockSpec, Terrain, TerrainRecipe, synthesize
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"

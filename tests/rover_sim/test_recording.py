@@ -11,7 +11,7 @@ from rerun.chunk import RrdReader
 
 from nav.camera import PinholeCamera, StereoRig
 from nav.geometry import R_to_quat_wxyz, rpy_to_R, se3
-from rover_sim.recording import (
+from rover_sim.io.recording import (
     NullRecorder,
     Recorder,
     RerunRecorder,

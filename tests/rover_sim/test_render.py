@@ -14,9 +14,9 @@ from scipy import ndimage
 
 import rover_sim  # noqa: F401
 from nav.camera import PinholeCamera, transform_points
-from rover_sim.cameras import camera_world_pose
 from rover_sim.errors import RenderingUnavailable
-from rover_sim.render import (
+from rover_sim.render.cameras import camera_world_pose
+from rover_sim.render.renderer import (
     DN12_MAX,
     ImageNoise,
     RenderConfig,
@@ -136,7 +136,7 @@ def test_render_physics_hfield_drape_matches(render_world) -> None:
 
 
 def stereo_rig_left(sim) -> PinholeCamera:
-    from rover_sim.cameras import stereo_rig
+    from rover_sim.render.cameras import stereo_rig
 
     return stereo_rig(sim.model, sim.data, "navcam", 256).left
 

@@ -1,4 +1,4 @@
-"""Rock sites in the simulator (rover_sim.rock_sites): the scenario, the evaluation, a one-site panorama."""
+"""Rock sites in the simulator (rover_sim.mission.survey): the scenario, the evaluation, a one-site panorama."""
 
 from __future__ import annotations
 
@@ -10,14 +10,14 @@ import pytest
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.rocks import ExtractedRock, LocalPlane, PanoramaStereoParams, Pose4, RockModel, RockPeak, SiteMatch
 from nav.trajectory import Pose
-from rover_sim.rock_sites import (
+from rover_sim.mission.scenario import GotoCmd, load_scenario, scenario_from_dict
+from rover_sim.mission.survey import (
     RockSiteSurvey,
     SiteSurvey,
     SurveyConfig,
     evaluate_extraction,
     evaluate_match,
 )
-from rover_sim.scenario import GotoCmd, load_scenario, scenario_from_dict
 from terrains import ExplicitRockSpec, RockSpec, TerrainRecipe, synthesize
 
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from nav.trajectory import read_tum
-from rover_sim.recording import entity_row_counts
-from rover_sim.runner import Mission, run_scenario
-from rover_sim.scenario import scenario_from_dict
+from rover_sim.io.recording import entity_row_counts
+from rover_sim.mission.pipeline import Mission, run_scenario
+from rover_sim.mission.scenario import scenario_from_dict
 
 TINY = {
     "name": "tiny",

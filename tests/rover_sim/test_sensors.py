@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import rover_sim  # noqa: F401
-from rover_sim.physics import RoverSim
-from rover_sim.sensors import (
+from rover_sim.sim.physics import RoverSim
+from rover_sim.sim.sensors import (
     G0_M_S2,
     EncoderModel,
     EncoderParams,

@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.stereo import StereoParams, compute_disparity, stereobm_baseline
 from rover_sim.bench.stereo import NUM_DISPARITIES, SimPair, score, simulated_pairs
-from rover_sim.stereo_cli import StereoInputError, disparity_from_files, load_grey, stereo_cmd
+from rover_sim.cli.stereo import StereoInputError, disparity_from_files, load_grey, stereo_cmd
 
 SEEDS = (3,)
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rover_sim.bench.slip import measure_slip, parked_drift_m, slope_terrain
-from rover_sim.terramechanics import BEDROCK, SAND, WheelSoilLaw, pack_inputs
+from rover_sim.sim.terramechanics import BEDROCK, SAND, WheelSoilLaw, pack_inputs
 
 W_N = 108.0  # one sixth of MER's weight on Mars
 DT = 0.005

@@ -154,7 +154,7 @@ def _split_top_level(text: str) -> list[str]:
 
 def parse_grid(text: str) -> GridAxis:
     """``terrain.slope.slope_deg=10,15,20`` -> a :class:`GridAxis`; values are TOML like ``--set`` values."""
-    from rover_sim.scenario import parse_override
+    from rover_sim.mission.scenario import parse_override
 
     if "=" not in text:
         raise ConfigError("--grid", text, "expected dotted.key=v1,v2,... (e.g. terrain.slope.slope_deg=10,15,20)")
@@ -186,7 +186,7 @@ def plan_jobs(
     ``overrides`` (``--set`` texts) apply to every job before the grid values. Points that resolve to the same
     scenario (``10`` and ``10.0``) are one job.
     """
-    from rover_sim.scenario import load_scenario
+    from rover_sim.mission.scenario import load_scenario
 
     keys = [a.key for a in axes]
     if len(set(keys)) != len(keys):
@@ -233,10 +233,10 @@ def run_job(job: Job, jobs_dir: str) -> JobResult:
     """
     job_dir = Path(jobs_dir) / job.job_id
     try:
-        from rover_sim.scenario import Scenario
+        from rover_sim.mission.scenario import Scenario
 
         scenario = Scenario.model_validate(job.scenario)
-        from rover_sim.runner import run_scenario
+        from rover_sim.mission.pipeline import run_scenario
 
         metrics = run_scenario(scenario, job_dir, record=False)
         return JobResult(job.job_id, "ok", metrics=metrics.deterministic_dict())  # = its metrics.json
@@ -557,7 +557,7 @@ def _figure(size_in: tuple[float, float]):
 
 def plot_slip_vs_slope(pts: Sequence[_Point], path: Path, title: str) -> Path:
     """Max slip of each drive against slope, one series per soil: mean over seeds, whiskers to min and max."""
-    from rover_sim.plots import DPI
+    from rover_sim.io.plots import DPI
 
     fig = _figure((6.4, 4.2))
     ax = fig.add_subplot()
@@ -575,7 +575,7 @@ def plot_slip_vs_slope(pts: Sequence[_Point], path: Path, title: str) -> Path:
 
 def plot_error_vs_slope(pts: Sequence[_Point], path: Path, title: str) -> Path:
     """Final position error (% of distance) of dead reckoning and VO against slope, per soil (mean over seeds)."""
-    from rover_sim.plots import DPI
+    from rover_sim.io.plots import DPI
 
     fig = _figure((6.4, 4.2))
     ax = fig.add_subplot()
@@ -617,7 +617,7 @@ def plot_slip_map(pts: Sequence[_Point], x_axis: GridAxis, y_axis: GridAxis, pat
     """Heatmap of the mean (over seeds and any other axes) max slip over two grid axes; blank where none ran."""
     import numpy as np
 
-    from rover_sim.plots import DPI
+    from rover_sim.io.plots import DPI
 
     grid = np.full((len(y_axis.values), len(x_axis.values)), np.nan)
     for iy, vy in enumerate(y_axis.values):

@@ -25,7 +25,7 @@ def _fail(err: Exception) -> None:
 @app.command("check-gl")
 def check_gl_cmd() -> None:
     """Check that offscreen rendering (EGL) works; prints the install hint if it does not."""
-    from rover_sim.render import check_gl
+    from rover_sim.render.renderer import check_gl
 
     try:
         check_gl()
@@ -47,7 +47,7 @@ def bench_slip(json: JsonOpt = None, seed: int = 0) -> None:
 @bench_app.command("render")
 def bench_render_cmd(json: JsonOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
-    from rover_sim.bench_render import bench_render
+    from rover_sim.bench.render import bench_render
 
     result = bench_render(str(json) if json else None)
     if result["stereo_pair_256_shadows_ms"] > 40.0:
@@ -121,9 +121,9 @@ def render_cmd(
     """Write a stereo pair, its depth and the camera-model JSON at the scenario's start pose."""
     import math
 
-    from rover_sim.bench_render import render_to_dir
-    from rover_sim.scenario import load_scenario
-    from rover_sim.world import Sun
+    from rover_sim.bench.render import render_to_dir
+    from rover_sim.mission.scenario import load_scenario
+    from rover_sim.sim.world import Sun
 
     try:
         sc = load_scenario(scenario, seed=seed)
@@ -183,7 +183,7 @@ def run_cmd(
     progress: Annotated[bool, typer.Option("--progress/--no-progress")] = True,
 ) -> None:
     """Run a mission scenario: writes recording.rrd, metrics.json, trajectories/*.tum, plots/*.png."""
-    from rover_sim.runner import run_scenario
+    from rover_sim.mission.pipeline import run_scenario
 
     try:
         metrics = run_scenario(scenario, out, seed=seed, overrides=set_ or [], record=record, progress=progress)
@@ -227,7 +227,7 @@ def sweep_cmd(
     set_: SetOpt = None,
 ) -> None:
     """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
-    from rover_sim.sweep import run_sweep
+    from rover_sim.mission.sweep import run_sweep
 
     def report(done: int, total: int, job, result) -> None:
         if not result.ok:
@@ -275,7 +275,7 @@ def stereo_command(
     window_px: Annotated[int, typer.Option("--window", help="SAD window side (odd).")] = 9,
 ) -> None:
     """MER SAD stereo on any rectified greyscale pair; writes float32 disparity."""
-    from rover_sim.stereo_cli import stereo_cmd
+    from rover_sim.cli.stereo import stereo_cmd
 
     try:
         stereo_cmd(left, right, num_disparities, out, window_px)

@@ -15,9 +15,10 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from rover_sim.errors import ConfigError
+from rover_sim.resources import scenarios_dir
 from terrains import TerrainRecipe
 
-SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+SCENARIOS_DIR = scenarios_dir()
 
 
 class _Spec(BaseModel):

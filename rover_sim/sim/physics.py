@@ -11,8 +11,8 @@ import numpy as np
 
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
-from rover_sim.terramechanics import WheelSoilLaw, WheelSoilState
-from rover_sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
+from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
+from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
 if TYPE_CHECKING:
     from terrains import Terrain

@@ -45,12 +45,12 @@ import mujoco
 import numpy as np
 
 from nav.camera import PinholeCamera, StereoRig
-from rover_sim.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
 from rover_sim.errors import RenderingUnavailable
-from rover_sim.world import ROCK_GEOM_PREFIX
+from rover_sim.render.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
+from rover_sim.sim.world import ROCK_GEOM_PREFIX
 
 if TYPE_CHECKING:
-    from rover_sim.physics import RoverSim
+    from rover_sim.sim.physics import RoverSim
     from terrains import Terrain
 
 LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)  # Rec. 601 luminance of RGB
@@ -542,7 +542,7 @@ class StereoRenderer:
 
     Owns one :class:`mujoco.Renderer` (one EGL context) per rasterised resolution, created on first use and
     reused; close it (or use it as a context manager) to free them. Camera geometry is taken from the physics
-    model, so :meth:`rig` equals :func:`rover_sim.cameras.stereo_rig` at the output resolution.
+    model, so :meth:`rig` equals :func:`rover_sim.render.cameras.stereo_rig` at the output resolution.
     """
 
     def __init__(self, sim: RoverSim, config: RenderConfig | None = None) -> None:

@@ -1,6 +1,6 @@
 """Rock-based cross-site localisation in the simulator: drive to sites, navcam stereo panoramas, evaluation.
 
-The pipeline object (:class:`RockSiteSurvey`) owns a :class:`rover_sim.runner.Mission` (terrain, physics, sensors,
+The pipeline object (:class:`RockSiteSurvey`) owns a :class:`~mission.pipeline.Mission` (terrain, physics, sensors,
 dead reckoning, VO) and a high-resolution navcam renderer; the algorithms in :mod:`nav.rocks` know none of them.
 A scenario's sites are its start pose plus the end of every ``goto`` command (``scenarios/rock_localization.toml``):
 the rover drives to each with the runner's VO-corrected goto, stops, stands for ``REST_BEFORE_PANORAMA_S`` (the dead
@@ -50,9 +50,9 @@ from nav.rocks import (
     panorama_points,
     voxel_downsample,
 )
-from rover_sim.drive import TICK_S
-from rover_sim.runner import Mission
-from rover_sim.scenario import GotoCmd, Scenario
+from rover_sim.mission.pipeline import Mission
+from rover_sim.mission.scenario import GotoCmd, Scenario
+from rover_sim.sim.drive import TICK_S
 from terrains import Rock, Terrain
 
 ROVER_BOX_HALF_M = (1.2, 1.45)  # rover-frame |x|, |y| of the rover's own body, wings and wheels: points cut out
@@ -118,7 +118,7 @@ class RockSiteSurvey:
         progress: Callable[[str], None] | None = None,
         keep_points: bool = False,
     ) -> None:
-        from rover_sim.render import ImageNoise, RenderConfig, StereoRenderer
+        from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer
 
         self.sc = scenario
         self.config = config

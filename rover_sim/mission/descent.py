@@ -21,7 +21,7 @@ latter.
 * **Camera** (:class:`DescentCameraConfig`): the MER descent imager had a 45 deg field of view and a 1024x1024
   detector; DIMES used the images binned to 256x256. We render 256x256 directly by default (GL mipmapping averages
   the texture; ``binning=4`` renders 1024x1024 and averages 4x4 blocks like the detector, 4-5x slower), convert
-  to luminance and add 12-bit read noise and quantisation (:mod:`rover_sim.render`). MuJoCo scales the clip
+  to luminance and add 12-bit read noise and quantisation (:mod:`rover_sim.render.renderer`). MuJoCo scales the clip
   planes by ``statistic/extent``: extent 1000 m with ``znear=0.01``, ``zfar=10`` gives 10 m to 10 km.
 * **Kinematics** (:class:`DescentTrajectory`, scripted, not a physics test): the pendulum pivot (parachute
   riser confluence on the backshell) falls at ``descent_rate_mps`` (about 75 m/s) and drifts with the wind, which
@@ -51,9 +51,9 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.dimes import DescentImage
 from nav.geometry import R_to_quat_wxyz, so3_exp
-from rover_sim.cameras import MJ_TO_CV
-from rover_sim.render import LUMA_WEIGHTS, ImageNoise, bin_average, check_gl, quantise
-from rover_sim.world import Sun, hfield_encoding
+from rover_sim.render.cameras import MJ_TO_CV
+from rover_sim.render.renderer import LUMA_WEIGHTS, ImageNoise, bin_average, check_gl, quantise
+from rover_sim.sim.world import Sun, hfield_encoding
 from terrains import (
     CraterSpec,
     MaterialSpec,
@@ -76,7 +76,7 @@ RECIPE_MAX_CELL_M = 2.0  # ... grid cell ...
 RECIPE_MAX_ROUGHNESS_M = 0.5  # ... and roughness rms
 CLIP_EXTENT_M = 1000.0  # MuJoCo statistic/extent: znear and zfar are multiples of it
 ZNEAR, ZFAR = 0.01, 10.0  # -> clip planes at 10 m and 10 km
-SUN_DIFFUSE = 1.3  # diffuse strength of the sun (as rover_sim.render)
+SUN_DIFFUSE = 1.3  # diffuse strength of the sun (as rover_sim.render.renderer)
 SKY_AMBIENT = 0.45  # uniform ambient light standing in for the dusty sky
 
 
@@ -359,7 +359,7 @@ class DescentCameraConfig:
     resolution_px: int = 256
     binning: int = 1  # 1: render at resolution_px; 4: render 1024 and average 4x4 (detector binning)
     fov_deg: float = 45.0
-    read_noise_dn12: float = 3.0  # rms read noise in 12-bit counts (0: quantisation only), as rover_sim.render
+    read_noise_dn12: float = 3.0  # rms read noise in 12-bit counts (0: quantisation only), as rover_sim.render.renderer
 
     @property
     def native_px(self) -> int:

@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
+from rover_sim.resources import models_dir
+
 if TYPE_CHECKING:
     from terrains import Terrain
 
 
-MODELS_DIR = Path(__file__).resolve().parent.parent / "models"
+MODELS_DIR = models_dir()
 SCENE_XML = MODELS_DIR / "mer" / "scene.xml"
 ROVER_XML = MODELS_DIR / "mer" / "rover.xml"
 

@@ -31,14 +31,14 @@ from nav.stereo import StereoParams, range_image
 from nav.trajectory import Pose, Trajectory, relative_errors, write_tum
 from nav.types import RoverGeometry
 from nav.vo import VisualOdometry
-from rover_sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
 from rover_sim.errors import PhysicsDiverged
-from rover_sim.physics import RoverSim
-from rover_sim.recording import NullRecorder, Recorder
-from rover_sim.render import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
-from rover_sim.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, TurnCmd
-from rover_sim.sensors import SensorSuite
-from rover_sim.world import Sun
+from rover_sim.io.recording import NullRecorder, Recorder
+from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, TurnCmd
+from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
+from rover_sim.sim.physics import RoverSim
+from rover_sim.sim.sensors import SensorSuite
+from rover_sim.sim.world import Sun
 from terrains import synthesize
 
 TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
@@ -172,7 +172,7 @@ class Mission:
         self.error: str | None = None
         self.step = 0
         self.keep_out_info: dict | None = None
-        self.autonav_stats = None  # set by rover_sim.autonav when the scenario uses autonav
+        self.autonav_stats = None  # set by rover_sim.mission.autonav when the scenario uses autonav
         self.body_collision_ticks = 0
         self.tall_rock_contact_ticks = 0
         self._last_frame_truth: np.ndarray | None = None
@@ -274,7 +274,7 @@ class Mission:
         self._event(f"goto ({cmd.x_m}, {cmd.y_m}): travel budget used up", "WARN")
 
     def _autonav(self, cmd: AutonavCmd) -> None:
-        from rover_sim.autonav import run_autonav
+        from rover_sim.mission.autonav import run_autonav
 
         run_autonav(self, cmd)
 
@@ -600,7 +600,7 @@ class Mission:
 
 def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     """metrics.json, trajectories/*.tum, plots/*.png, scenario.json (the resolved config) and events.log."""
-    from rover_sim import plots
+    from rover_sim.io import plots
 
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "metrics.json").write_text(json.dumps(metrics.deterministic_dict(), indent=2))
@@ -651,8 +651,8 @@ def run_scenario(
 ) -> Metrics:
     """Load, run and write one scenario. Ctrl-C or a physics divergence still leaves a valid recording and
     partial metrics (``passed`` false, ``reason`` says why)."""
-    from rover_sim.recording import RerunRecorder
-    from rover_sim.scenario import load_scenario
+    from rover_sim.io.recording import RerunRecorder
+    from rover_sim.mission.scenario import load_scenario
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
     if out_dir is not None:

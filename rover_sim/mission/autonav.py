@@ -23,11 +23,11 @@ from nav.camera import transform_points
 from nav.gestalt import Arc as GestaltArc
 from nav.gestalt import GestaltParams, GestaltPlanner, arc_pose
 from nav.stereo import StereoParams, range_image
-from rover_sim.drive import Arc, Primitive, Straight, TurnInPlace
+from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
 
 if TYPE_CHECKING:
-    from rover_sim.runner import Mission
-    from rover_sim.scenario import AutonavCmd
+    from rover_sim.mission.pipeline import Mission
+    from rover_sim.mission.scenario import AutonavCmd
 
 HAZCAM = "hazcam_front"
 REAR_HAZCAM = "hazcam_rear"  # imaged too while the rover is backing up (it does not otherwise look behind)

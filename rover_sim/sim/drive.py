@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.types import STEERED, WHEELS, RoverGeometry
-from rover_sim.physics import RoverSim
+from rover_sim.sim.physics import RoverSim
 
 MAX_WHEEL_SPEED_M_S = 0.05  # MER peak drive speed (REFERENCE.md section 1)
 NOMINAL_SPEED_M_S = 0.0375  # typical MER drive speed

@@ -34,7 +34,7 @@ from scipy.signal import lfilter
 from nav.types import EncoderSample, ImuSample
 
 if TYPE_CHECKING:
-    from rover_sim.physics import RoverSim
+    from rover_sim.sim.physics import RoverSim
 
 G0_M_S2 = 9.80665  # standard (Earth) gravity: the g of "micro-g" in accelerometer datasheets
 DEG = math.pi / 180.0
