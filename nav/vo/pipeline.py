@@ -37,7 +37,7 @@ import numpy as np
 
 from nav.camera import StereoRig
 from nav.geometry import se3_inv
-from nav.vo_features import (
+from nav.vo.features import (
     WindowStats,
     correlate_window,
     detect_features,
@@ -47,7 +47,7 @@ from nav.vo_features import (
     window_at,
     window_stats,
 )
-from nav.vo_motion import (
+from nav.vo.motion import (
     RansacResult,
     downslope_direction,
     feature_covariance,
@@ -61,7 +61,7 @@ from nav.vo_motion import (
     triangulate_rays,
     triangulate_stereo,
 )
-from nav.vo_params import SanityConstraints, VoParams
+from nav.vo.params import SanityConstraints, VoParams
 
 __all__ = [
     "FeatureFrame",
