@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from nav.camera import PinholeCamera
-from nav.vo_features import fit_biquadratic_peak
+from nav.vo.features import fit_biquadratic_peak
 
 # ------------------------------------------------------------------------------------------------- types
 

@@ -24,7 +24,7 @@ from nav.vo import (
     triangulate_rays,
     triangulate_stereo,
 )
-from nav.vo_motion import gap_test, motion_from_RT
+from nav.vo.motion import gap_test, motion_from_RT
 
 RIG = make_rig()
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from nav.vo_params import VoParams
+from nav.vo.params import VoParams
 
 
 # ------------------------------------------------------------------------------------------------------------

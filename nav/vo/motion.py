@@ -16,7 +16,7 @@ import numpy as np
 
 from nav.camera import PinholeCamera, StereoRig
 from nav.geometry import R_to_rpy, se3, se3_inv, skew, so3_exp, so3_log
-from nav.vo_params import SanityConstraints, VoParams
+from nav.vo.params import SanityConstraints, VoParams
 
 
 # ------------------------------------------------------------------------------------------------------------

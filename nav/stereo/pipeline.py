@@ -1,0 +1,323 @@
+"""The MER stereo pipeline (Maimone et al. 2005, section 4.1) run end to end: :func:`compute_disparity` (steps
+1-6 in order, on buffers kept between calls), the step functions that run on the same cached pipeline
+(:func:`row_search_window`, step 2; :func:`sad_search`, step 3), the paper's "XYZ range images"
+(:func:`range_image`) and the OpenCV StereoBM baseline.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import cv2
+import numpy as np
+
+from nav.camera import PinholeCamera, StereoRig
+from nav.stereo.bandpass import bandpass_into, quantise_gain, quantise_into, texture_into
+from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle, uniqueness
+from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
+from nav.stereo.sad import Engine, subpixel
+
+_SIZE_LIMIT = 2**24  # H * W * 2 * quantise_cap must stay below (see compute_disparity)
+# A parabola curvature (SAD units) this large means a neighbour's score was NO_MATCH (not searched).
+_CURVATURE_LIMIT = float(2**19)
+_COARSE_SCALE = 4  # row_search_window matches the images binned 4x4 (two pyrDown)
+_COARSE_MIN_VOTES = 8  # a disparity must be found this many times near a row to enter its search window
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Step 2: the disparity window of each row
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def row_search_window(bp_left: np.ndarray, bp_right: np.ndarray, params: StereoParams = StereoParams()) -> RowWindow:
+    """Step 2: the disparity indices to search on each row, from a full-range search at quarter resolution.
+
+    Both band-passed images are binned 4x4 (``cv2.pyrDown`` twice), quantised and matched over the whole range with
+    the same engine (a 5 px window there, 20 px of the image). Matches that pass the left-right, uniqueness (over the
+    whole range: the full-resolution search sees only the row's window) and texture checks vote for their sub-pixel
+    disparity times 4. A row's window spans the disparities with at least ``_COARSE_MIN_VOTES`` votes on the coarse
+    rows its SAD window touches, widened by ``row_window_margin_px`` on both sides. Rows without votes are not searched
+    (the sky, featureless ground). Everything then happens on the rows from the first to the last searched one.
+    """
+    bp_left, bp_right = np.asarray(bp_left, np.float32), np.asarray(bp_right, np.float32)
+    return _pipeline(bp_left.shape, params).row_window(bp_left, bp_right)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Step 3: SAD search
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def sad_search(
+    left_q: np.ndarray, right_q: np.ndarray, params: StereoParams = StereoParams(), window: RowWindow | None = None
+) -> SadSearch:
+    """Step 3 (paper: "area-based algorithm using the sum of absolute differences (SAD) criterion").
+
+    For every disparity ``s`` the window SAD between the left image and the right image shifted by ``s`` is formed
+    from an integral image of ``|L(u) - R(u - s)|`` over the rows whose ``window`` contains it (all rows if
+    ``window`` is None). The window is clipped at the top, bottom and right borders (the same pixels for every
+    disparity) and must lie inside the right image on the left. Each score is stored as
+    ``key = SAD + index / 256``. The running minimum of the keys over the left pixels gives the left winner; the
+    running minimum over the *right* pixels ``u_right = u - s`` gives the right-referenced winner (the same scores,
+    so exactly the disparity a search from the right image would find). Per disparity class ``index mod 3`` the
+    best two keys are kept: the best score more than 1 px from the winner is then the best of three candidates (a
+    class holds at most one neighbour of the winner), so the uniqueness test is exact without a second pass.
+    """
+    left_q, right_q = _as_pair(left_q, right_q)
+    _check_size(left_q.shape, params)
+    engine = _pipeline(left_q.shape, params).engine
+    np.copyto(engine.left_q, left_q)
+    np.copyto(engine.right_q, right_q)
+    engine.search(window)
+    index, right_index = engine.winners()
+    cost, cost_minus, cost_plus, second = engine.scores(index)
+    found = engine.found()
+    return SadSearch(
+        np.where(found, index, -1).astype(np.int32),
+        cost.copy(),
+        cost_minus.copy(),
+        cost_plus.copy(),
+        second.copy(),
+        right_index.astype(np.int32),
+        engine.window,
+    )
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The pipeline
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def compute_disparity(left_u8: np.ndarray, right_u8: np.ndarray, params: StereoParams = StereoParams()) -> np.ndarray:
+    """Left-referenced disparity (px, float32, NaN where invalid) of a rectified 8-bit pair, MER style."""
+    left_u8, right_u8 = _as_pair(left_u8, right_u8)
+    _check_size(left_u8.shape, params)
+    return _pipeline(left_u8.shape, params).run(left_u8, right_u8)
+
+
+def _check_size(shape: tuple[int, int], params: StereoParams) -> None:
+    if shape[0] * shape[1] * 2 * params.quantise_cap >= _SIZE_LIMIT:
+        raise ValueError(
+            f"image {shape} too large for exact float32 SAD sums: bin it to 512x512 or less (MER used 256x256)"
+        )
+
+
+class _Pipeline:
+    """:func:`compute_disparity` for one image shape and parameter set, with every buffer it needs."""
+
+    def __init__(self, shape: tuple[int, int], params: StereoParams) -> None:
+        self.shape, self.params = shape, params
+        cap2 = 2 * params.quantise_cap
+        self.engine = Engine(shape, params.min_disparity, params.num_disparities, params.window_px, cap2)
+        f32, u8 = (lambda s=shape: np.empty(s, np.float32)), (lambda s=shape: np.empty(s, np.uint8))
+        self.bp_left, self.bp_right, self.scratch, self.scratch2, self.scratch3, self.curvature, self.offset = (
+            f32() for _ in range(7)
+        )
+        self.ok, self.ok2, self.ok3, self.ok2x, self.ok4 = (u8() for _ in range(5))
+        self.lo, self.hi = f32(), f32()
+        self.fixed, self.fixed2 = np.empty(shape, np.int16), np.empty(shape, np.int16)
+        self.nan = np.full(shape, np.nan, np.float32)
+        self.minus16 = np.full(shape, -16, np.int16)
+        # coarse search (row windows)
+        f = _COARSE_SCALE
+        self.coarse = None
+        if params.row_window and min(shape) >= 8 * f:
+            shape_c = shape
+            while shape_c[0] > (shape[0] + f - 1) // f:
+                shape_c = ((shape_c[0] + 1) // 2, (shape_c[1] + 1) // 2)
+            self.min_c = params.min_disparity // f
+            self.n_c = -(-(params.min_disparity + params.num_disparities) // f) - self.min_c + 1
+            self.window_c = max(5, (params.window_px // 2) | 1)  # at 1/4 scale: 20 px or more of the image
+            self.coarse = Engine(shape_c, self.min_c, self.n_c, self.window_c, cap2)
+            f32c, u8c = (lambda: np.empty(shape_c, np.float32)), (lambda: np.empty(shape_c, np.uint8))
+            self.left_c, self.right_c, self.scratch_c, self.scratch_c2, self.curvature_c, self.offset_c = (
+                f32c() for _ in range(6)
+            )
+            self.ok_c, self.ok_c2 = u8c(), u8c()
+            self.bins = np.empty(shape_c, np.int32)
+            n_bins = params.num_disparities + 2
+            # the coarse rows a full-resolution row's SAD window touches
+            v, hw = np.arange(shape[0]), params.half_window_px
+            self.vote_lo = np.clip((v - hw) // f, 0, shape_c[0])
+            self.vote_hi = np.clip((v + hw) // f + 1, 0, shape_c[0])
+            self.row_bins = np.repeat((np.arange(shape_c[0], dtype=np.int32) * n_bins)[:, None], shape_c[1], axis=1)
+            self.cum = np.zeros((shape_c[0] + 1, n_bins), np.int64)
+
+    def row_window(self, bp_left: np.ndarray, bp_right: np.ndarray) -> RowWindow:
+        params, h_px = self.params, self.shape[0]
+        if self.coarse is None:
+            return RowWindow.full(h_px, params.num_disparities)
+        left_c, right_c = bp_left, bp_right
+        while left_c.shape != self.coarse.shape:
+            last = (
+                left_c.shape == (self.coarse.shape[0] * 2, self.coarse.shape[1] * 2)
+                or ((left_c.shape[0] + 1) // 2, (left_c.shape[1] + 1) // 2) == self.coarse.shape
+            )
+            left_c = cv2.pyrDown(left_c, dst=self.left_c if last else None)
+            right_c = cv2.pyrDown(right_c, dst=self.right_c if last else None)
+        window_c, coarse = self.window_c, self.coarse
+        quantise_into(left_c, params, coarse.left_q)
+        quantise_into(right_c, params, coarse.right_q)
+        coarse.search(None)
+        index, right_index = coarse.winners()
+        ok = left_right(index, right_index, 1, 0, self.ok_c, self.scratch_c, self.scratch_c2, self.ok_c2)
+        # uniqueness over the whole range (the full-resolution search sees only the row's window)
+        cost, cost_minus, cost_plus, second = coarse.scores(index)
+        subpixel(cost_minus, cost, cost_plus, self.curvature_c, self.offset_c)
+        uniq = uniqueness(cost, second, self.curvature_c, params.uniqueness_ratio, self.ok_c2, self.scratch_c)
+        cv2.bitwise_and(ok, uniq, dst=ok)
+        cv2.bitwise_and(
+            ok, texture_into(left_c, params.texture_threshold, window_c, self.ok_c2, self.scratch_c), dst=ok
+        )
+        # votes per (coarse row, full-resolution disparity index + 1): the coarse sub-pixel disparity times the
+        # scale; pixels that fail vote for bin 0, which is not counted
+        f, n_bins = _COARSE_SCALE, params.num_disparities + 2
+        bins = cv2.addWeighted(
+            index, f, self.offset_c, f, f * self.min_c - params.min_disparity + 1.0, dst=self.bins, dtype=cv2.CV_32S
+        )
+        cv2.min(cv2.max(bins, 1, dst=bins), n_bins - 1, dst=bins)
+        cv2.add(bins, self.row_bins, dst=bins)  # the coarse row's histogram
+        cv2.copyTo(self.row_bins, cv2.bitwise_not(ok, dst=ok), bins)  # its bin 0
+        h_c = coarse.shape[0]
+        cum = self.cum
+        np.cumsum(np.bincount(bins.ravel(), minlength=h_c * n_bins).reshape(h_c, n_bins), axis=0, out=cum[1:])
+        found = (cum[self.vote_hi] - cum[self.vote_lo]) >= _COARSE_MIN_VOTES  # (H, bins): disparities near each row
+        found[:, 0] = False
+        d_max = params.num_disparities - 1
+        lo = np.argmax(found, axis=1) - (1 + params.row_window_margin_px)  # bin b holds index b - 1
+        hi = (n_bins - 2 + params.row_window_margin_px) - np.argmax(found[:, ::-1], axis=1)
+        np.maximum(lo, 0, out=lo)
+        np.minimum(hi, d_max, out=hi)
+        hi[~found.any(axis=1)] = -1  # nothing matched near this row: not searched
+        return RowWindow(np.minimum(lo, d_max).astype(np.int32), hi.astype(np.int32))
+
+    def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
+        params, h_px = self.params, self.shape[0]
+        bp_left = bandpass_into(left_u8, params, self.bp_left, self.scratch)  # 1. band-pass
+        bp_right = bandpass_into(right_u8, params, self.bp_right, self.scratch)
+        window = self.row_window(bp_left, bp_right)  # 2. row windows
+        searched = np.nonzero(window.lo <= window.hi)[0]
+        disparity = np.full(self.shape, np.nan, np.float32)  # the result: a fresh array
+        if searched.size == 0:
+            return disparity
+        v0, v1 = int(searched[0]), int(searched[-1]) + 1  # everything below works on these rows only
+        rows = slice(v0, v1)
+        engine = self.engine  # 3. SAD
+        gain_left = quantise_gain(bp_left, params)
+        quantise_into(bp_left, params, engine.left_q, gain_left)
+        quantise_into(bp_right, params, engine.right_q)
+        engine.search(window, (v0, v1))
+        index, right_index = engine.winners(v0, v1)
+        cost, cost_minus, cost_plus, second = engine.scores(index)
+        curvature, offset = self.curvature[rows], self.offset[rows]
+        subpixel(cost_minus, cost, cost_plus, curvature, offset)  # 4. sub-pixel
+        # 5. checks. Edge: lo < index < hi, and both neighbours' scores exist (else the curvature is huge)
+        ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
+        scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
+        lo, hi = self.lo[rows], self.hi[rows]
+        np.copyto(lo, window.lo[rows, None])
+        np.copyto(hi, window.hi[rows, None])
+        cv2.compare(index, lo, cv2.CMP_GT, dst=ok)
+        cv2.bitwise_and(ok, cv2.compare(index, hi, cv2.CMP_LT, dst=tmp), dst=ok)
+        cv2.bitwise_and(ok, cv2.compare(curvature, 0.0, cv2.CMP_GT, dst=tmp), dst=ok)
+        cv2.bitwise_and(ok, cv2.compare(curvature, _CURVATURE_LIMIT, cv2.CMP_LT, dst=tmp), dst=ok)
+        hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side
+        t0, t1 = max(v0 - hw, 0), min(v1 + hw, h_px)
+        texture = texture_into(
+            bp_left[t0:t1], params.texture_threshold, params.window_px, self.ok4[t0:t1], self.scratch3[t0:t1]
+        )
+        cv2.bitwise_and(ok, texture[v0 - t0 : v1 - t0], dst=ok)
+        if params.max_sad_ratio > 0:  # match quality, from the texture's local mean square
+            limit = sad_limit(self.scratch3[v0:v1], params, gain_left, scratch)
+            cv2.bitwise_and(ok, cv2.compare(cost, limit, cv2.CMP_LE, dst=tmp), dst=ok)
+        cv2.bitwise_and(ok, uniqueness(cost, second, curvature, params.uniqueness_ratio, tmp, scratch), dst=ok)
+        cv2.bitwise_and(
+            ok, left_right(index, right_index, params.lr_max_diff_px, 0, tmp, scratch, scratch2, tmp2), dst=ok
+        )
+        out = disparity[rows]
+        cv2.add(index, offset, dst=out)
+        if params.min_disparity:
+            cv2.add(out, float(params.min_disparity), dst=out)
+        cv2.bitwise_not(ok, dst=bad)
+        if params.discontinuity_px > 0 or params.speckle_window_size > 0:
+            fixed = cv2.multiply(out, 16.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
+        if params.discontinuity_px > 0:
+            keep = discontinuity(fixed, bad, params.discontinuity_px, hw, tmp, tmp2, self.fixed2[rows])
+            cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
+        if params.speckle_window_size > 0:  # 6. blob filter
+            cv2.copyTo(self.minus16[rows], bad, fixed)
+            keep = speckle(fixed, params, tmp)
+            cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
+        cv2.copyTo(self.nan[rows], bad, out)
+        return disparity
+
+
+_THREAD = threading.local()
+
+
+def _pipeline(shape: tuple[int, int], params: StereoParams) -> _Pipeline:
+    """The calling thread's pipeline for this shape and parameter set (two are kept: its SAD volume is
+    ``num_disparities * H * W * 4`` bytes)."""
+    cache = getattr(_THREAD, "pipelines", None)
+    if cache is None:
+        cache = _THREAD.pipelines = {}
+    key = (tuple(shape), params)
+    pipe = cache.get(key)
+    if pipe is None:
+        if len(cache) >= 2:
+            cache.pop(next(iter(cache)))
+        pipe = cache[key] = _Pipeline(tuple(shape), params)
+    return pipe
+
+
+def _as_pair(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    left, right = np.asarray(left), np.asarray(right)
+    if left.shape != right.shape or left.ndim != 2:
+        raise ValueError(f"need two greyscale images of one shape, got {left.shape} and {right.shape}")
+    if left.dtype != np.uint8 or right.dtype != np.uint8:
+        raise ValueError("images must be uint8 (8-bit greyscale); convert with np.clip(img, 0, 255).astype(np.uint8)")
+    return np.ascontiguousarray(left), np.ascontiguousarray(right)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# XYZ range images
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def disparity_to_xyz_cam(disparity_px: np.ndarray, rig: StereoRig) -> np.ndarray:
+    """(H, W, 3) left-camera-frame points of a disparity image; NaN where the disparity is NaN or not positive."""
+    d = np.asarray(disparity_px, dtype=np.float64)
+    cam = rig.left
+    z = rig.depth_from_disparity(d)
+    v, u = np.indices(d.shape, dtype=np.float64)
+    x = (u - cam.cx_px) / cam.fx_px * z
+    y = (v - cam.cy_px) / cam.fy_px * z
+    return np.stack([x, y, z], axis=-1)
+
+
+def xyz_cam_to_rover(xyz_cam: np.ndarray, cam: PinholeCamera) -> np.ndarray:
+    """Map (..., 3) camera-frame points to the rover frame with ``cam.T_rover_cam``; NaN points stay NaN."""
+    T = np.asarray(cam.T_rover_cam, dtype=np.float64)
+    return np.asarray(xyz_cam, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+
+
+def range_image(
+    left_u8: np.ndarray, right_u8: np.ndarray, rig: StereoRig, params: StereoParams = StereoParams()
+) -> RangeImage:
+    """Disparity, camera- and rover-frame XYZ of a rectified pair (the paper's "XYZ range images")."""
+    disparity = compute_disparity(left_u8, right_u8, params)
+    xyz_cam = disparity_to_xyz_cam(disparity, rig)
+    valid = np.isfinite(xyz_cam[..., 2])
+    return RangeImage(disparity, xyz_cam, xyz_cam_to_rover(xyz_cam, rig.left), valid)
+
+
+def stereobm_baseline(
+    left_u8: np.ndarray, right_u8: np.ndarray, num_disparities: int = 64, window_px: int = 9
+) -> np.ndarray:
+    """Plain OpenCV StereoBM (default checks), float32 px with NaN where invalid: the benchmark reference."""
+    left_u8, right_u8 = _as_pair(left_u8, right_u8)
+    bm = cv2.StereoBM_create(numDisparities=num_disparities, blockSize=window_px)
+    raw = bm.compute(left_u8, right_u8)
+    disparity = raw.astype(np.float32) / 16.0
+    disparity[raw < 0] = np.nan  # StereoBM marks invalid pixels with (min_disparity - 1) * 16 = -16
+    return disparity

@@ -1,0 +1,288 @@
+"""Steps 3-4 of the MER stereo pipeline (Maimone et al. 2005, section 4.1): the "area-based algorithm using the
+sum of absolute differences (SAD) criterion" (:class:`Engine`, one pass over the disparities) and the
+"subpixel disparities [...] computed by quadratic interpolation of SAD scores".
+
+The public step function :func:`nav.stereo.sad_search` runs the engine held by the cached pipeline (its
+buffers are shared with :func:`nav.stereo.compute_disparity`), so it lives in :mod:`nav.stereo.pipeline`.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from nav.stereo.params import NO_MATCH, TAG, RowWindow
+
+# ----------------------------------------------------------------------------------------------------------------
+# Step 3: SAD search
+# ----------------------------------------------------------------------------------------------------------------
+
+
+class Engine:
+    """The SAD search over one image shape and disparity range, with its buffers (reused between calls).
+
+    ``costs[i, v, u]`` keeps every SAD key. A disparity is written only on the rows that search it, so other rows
+    may hold keys from an earlier call: they are read only for winners strictly inside their row's window. The
+    columns left of each disparity's first full window are never written and read ``NO_MATCH``.
+    """
+
+    def __init__(
+        self,
+        shape: tuple[int, int],
+        min_disparity: int,
+        num_disparities: int,
+        window_px: int,
+        max_value: int,
+    ) -> None:
+        h_px, w_px = shape
+        hw = window_px // 2
+        self.shape, self.min_disparity, self.num_disparities, self.window_px = (
+            shape,
+            min_disparity,
+            num_disparities,
+            window_px,
+        )
+        self.costs = np.full((num_disparities, h_px, w_px), NO_MATCH, np.float32)
+        self.best = np.empty((3, h_px, w_px), np.float32)  # best key per disparity class (index mod 3)
+        self.second = np.empty((3, h_px, w_px), np.float32)  # second-best key per class
+        self.best_right = np.empty(shape, np.float32)  # best key per right pixel
+        self.tmp = np.empty(shape, np.float32)
+        # |L - R| with hw zero rows above and below and hw zero columns on the right: windows there are clipped
+        self.diff = np.zeros((h_px + 2 * hw, w_px + hw), np.uint8)
+        # float32 integral images are exact below 2^24
+        exact = (h_px + 2 * hw + 1) * (w_px + hw + 1) * max_value < 2**24
+        depth = np.float32 if exact else np.int32
+        self.sdepth = cv2.CV_32F if exact else cv2.CV_32S
+        self.integral = np.empty((h_px + 2 * hw + 1, w_px + hw + 1), depth)
+        self.band = np.empty((h_px, w_px + hw + 1), depth)
+        self.window = RowWindow.full(h_px, num_disparities)
+        self.u_grid, self.v_grid = grids(shape)
+        f32, u8 = (lambda: np.empty(shape, np.float32)), (lambda: np.empty(shape, np.uint8))
+        self.best_all, self.cost, self.index, self.right_index = f32(), f32(), f32(), f32()
+        self.rows, self.key_minus, self.key_plus, self.cost_minus, self.cost_plus = f32(), f32(), f32(), f32(), f32()
+        self.far, self.far_tmp, self.best01 = f32(), f32(), f32()
+        self.mask, self.mask_tmp = u8(), u8()
+        self.no_match = np.full(shape, NO_MATCH, np.float32)
+        self.left_q, self.right_q = u8(), u8()  # the images to search: the caller writes them
+        self.views = self._views()
+
+    def _views(self) -> list[tuple]:
+        """Per disparity: its shift, tag and the column slices of every buffer it touches (row-sliced per band)."""
+        h_px, w_px = self.shape
+        hw, win = self.window_px // 2, self.window_px
+        views = []
+        for i in range(self.num_disparities):
+            s = self.min_disparity + i
+            n_cols = w_px - s - hw  # left pixels u in [s + hw, w_px) have their window inside the right image
+            if n_cols <= 0:
+                break
+            c = i % 3
+            integ = self.integral[:, : w_px + hw - s + 1]
+            band = self.band[:, : w_px + hw - s + 1]
+            views.append(
+                (
+                    s,
+                    i / TAG,
+                    self.left_q[:, s:],
+                    self.right_q[:, : w_px - s],
+                    self.diff[:, s:w_px],
+                    self.diff[:, s:],
+                    integ,
+                    integ[win:],
+                    band,
+                    band[:, win:],
+                    band[:, :n_cols],
+                    self.costs[i, :, s + hw :],
+                    self.best[c, :, s + hw :],
+                    self.second[c, :, s + hw :],
+                    self.tmp[:, :n_cols],
+                    self.best_right[:, hw : w_px - s],
+                )
+            )
+        return views
+
+    def search(self, window: RowWindow | None, rows: tuple[int, int] | None = None) -> None:
+        """Search ``self.left_q`` against ``self.right_q`` (quantised images, written by the caller).
+
+        ``rows``: the running minima are reset on these rows only (all rows that search anything must be inside;
+        decode only these rows).
+        """
+        h_px = self.shape[0]
+        hw = self.window_px // 2
+        self.window = window = window if window is not None else RowWindow.full(h_px, self.num_disparities)
+        v0, v1 = rows if rows is not None else (0, h_px)
+        self.best[:, v0:v1].fill(NO_MATCH)
+        self.second[:, v0:v1].fill(NO_MATCH)
+        self.best_right[v0:v1].fill(NO_MATCH)
+        absdiff, integral, subtract, add_weighted = cv2.absdiff, cv2.integral, cv2.subtract, cv2.addWeighted
+        vmin, vmax, f32, sdepth = cv2.min, cv2.max, cv2.CV_32F, self.sdepth
+        # (views stop at the first disparity with no column left in the image)
+        for view, runs in zip(self.views, _row_bands(window, self.num_disparities), strict=False):
+            (
+                s,
+                tag,
+                left,
+                right,
+                diff_out,
+                diff_in,
+                integ,
+                integ_hi,
+                band,
+                band_hi,
+                band_lo,
+                costs,
+                best,
+                second,
+                tmp,
+                best_right,
+            ) = view
+            for a, b in runs:
+                r0, r1, n = max(a - hw, 0), min(b + hw, h_px), b - a
+                absdiff(left[r0:r1], right[r0:r1], dst=diff_out[r0 + hw : r1 + hw])
+                integral(diff_in[a : b + 2 * hw], sum=integ[: n + 2 * hw + 1], sdepth=sdepth)
+                subtract(integ_hi[:n], integ[:n], dst=band[:n])  # sums over `window_px` rows
+                key = costs[a:b]
+                add_weighted(band_hi[:n], 1.0, band_lo[:n], -1.0, tag, dst=key, dtype=f32)  # ... and columns, tagged
+                best_c, second_c = best[a:b], second[a:b]
+                vmin(second_c, vmax(best_c, key, dst=tmp[:n]), dst=second_c)
+                vmin(best_c, key, dst=best_c)
+                right_c = best_right[a:b]
+                vmin(right_c, key, dst=right_c)
+
+    def winners(self, v0: int = 0, v1: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel (-1 if none),
+        on rows ``v0:v1`` (views of workspace buffers).
+
+        A key's index is its fractional part times 256 (exact: SAD < 2^16 and 8 fractional bits fit in float32).
+        """
+        rows = slice(v0, v1)
+        self.rows_decoded = rows
+        best01 = cv2.min(self.best[0, rows], self.best[1, rows], dst=self.best01[rows])
+        best = cv2.min(best01, self.best[2, rows], dst=self.best_all[rows])
+        cost = np.floor(best, out=self.cost[rows])
+        index = cv2.multiply(cv2.subtract(best, cost, dst=self.index[rows]), float(TAG), dst=self.index[rows])
+        best_right = self.best_right[rows]
+        right = np.floor(best_right, out=self.right_index[rows])
+        right = cv2.multiply(cv2.subtract(best_right, right, dst=right), float(TAG), dst=right)
+        none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, dst=self.mask_tmp[rows])
+        cv2.subtract(right, 1.0, dst=right, mask=none)
+        return index, right
+
+    def found(self) -> np.ndarray:
+        """Where the left pixel had any candidate (bool; call after winners)."""
+        return self.cost[self.rows_decoded] < NO_MATCH
+
+    def scores(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """SAD of the winner and of index -+ 1, and the best SAD more than 1 px away (rows as in winners).
+
+        The neighbours' keys are read back from ``costs`` (nearest-neighbour remap of its (D * H, W) view) and are
+        valid only where the winner lies strictly inside its row's window (see edge_mask).
+        """
+        h_px, w_px = self.shape
+        n = self.num_disparities
+        sl = self.rows_decoded
+        key_minus, key_plus, far_tmp, stack_row = self.key_minus[sl], self.key_plus[sl], self.far_tmp[sl], self.rows[sl]
+        # row of (index, v) in costs as (D * H, W)
+        rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], dst=stack_row)
+        if h_px * n < 32000:  # remap converts coordinates to int16
+            stacked = self.costs.reshape(n * h_px, w_px)
+            for key, shift in ((key_minus, -float(h_px)), (key_plus, float(h_px))):
+                cv2.remap(
+                    stacked,
+                    self.u_grid[sl],
+                    cv2.add(rows, shift, dst=far_tmp),
+                    cv2.INTER_NEAREST,
+                    dst=key,
+                    borderMode=cv2.BORDER_CONSTANT,
+                    borderValue=NO_MATCH,
+                )
+        else:
+            flat = rows.astype(np.int64) * w_px + np.arange(w_px)
+            keys = self.costs.reshape(-1)
+            np.copyto(key_minus, keys.take(flat - h_px * w_px, mode="clip"))
+            np.copyto(key_plus, keys.take(flat + h_px * w_px, mode="clip"))
+        cost_minus = np.floor(key_minus, out=self.cost_minus[sl])
+        cost_plus = np.floor(key_plus, out=self.cost_plus[sl])
+        # Best score more than 1 px from the winner. Each class holds exactly one of the disparities w - 1, w, w + 1;
+        # if a class's best is that one its second is far, else its best is. Sorted, the class bests are the
+        # winner's key, then mid and top: the far minimum among them is mid unless mid is a neighbour's key, else
+        # top unless top is; the class seconds are always candidates.
+        b0, b1, b2 = self.best[0, sl], self.best[1, sl], self.best[2, sl]
+        top = cv2.max(b0, b1, dst=far_tmp)
+        mid = cv2.max(self.best01[sl], cv2.min(top, b2, dst=stack_row), dst=stack_row)
+        cv2.max(top, b2, dst=top)
+        near, tmp_mask = self.mask[sl], self.mask_tmp[sl]
+        for cand in (top, mid):
+            cv2.compare(cand, key_minus, cv2.CMP_EQ, dst=near)
+            cv2.bitwise_or(near, cv2.compare(cand, key_plus, cv2.CMP_EQ, dst=tmp_mask), dst=near)
+            if cand is top:
+                cv2.copyTo(self.no_match[sl], near, top)
+            else:
+                cv2.copyTo(mid, cv2.bitwise_not(near, dst=near), top)
+        far = cv2.min(self.second[0, sl], self.second[1, sl], dst=self.far[sl])
+        cv2.min(far, self.second[2, sl], dst=far)
+        cv2.min(far, top, dst=far)
+        return self.cost[sl], cost_minus, cost_plus, np.floor(far, out=far)
+
+
+def _row_bands(window: RowWindow, num_disparities: int, merge_gap: int = 40) -> list[list[tuple[int, int]]]:
+    """For each disparity index, the bands ``[a, b)`` of rows that search it (bands at most ``merge_gap`` rows apart
+    are merged: each band costs a few OpenCV calls and half a window of rows above and below)."""
+    i = np.arange(num_disparities)[:, None]
+    inside = np.zeros((num_disparities, window.lo.size + 2), np.int8)
+    inside[:, 1:-1] = (window.lo[None, :] <= i) & (i <= window.hi[None, :])
+    change = np.diff(inside, axis=1)  # +1 where a band starts, -1 one past where it ends
+    starts_i, starts_v = np.nonzero(change > 0)
+    _, ends_v = np.nonzero(change < 0)
+    bands: list[list[tuple[int, int]]] = [[] for _ in range(num_disparities)]
+    for k, a, b in zip(starts_i.tolist(), starts_v.tolist(), ends_v.tolist(), strict=True):
+        runs = bands[k]
+        if runs and a - runs[-1][1] <= merge_gap:
+            runs[-1] = (runs[-1][0], b)
+        else:
+            runs.append((a, b))
+    return bands
+
+
+def grids(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """float32 column and row coordinate images (read-only views of shared arrays)."""
+    h_px, w_px = shape
+    grids = _GRIDS.get(w_px)
+    if grids is None or grids[0].shape[0] < h_px:
+        u_grid = np.tile(np.arange(w_px, dtype=np.float32), (h_px, 1))
+        v_grid = np.tile(np.arange(h_px, dtype=np.float32)[:, None], (1, w_px))
+        u_grid.flags.writeable = v_grid.flags.writeable = False
+        grids = _GRIDS[w_px] = (u_grid, v_grid)
+    return grids[0][:h_px], grids[1][:h_px]
+
+
+_GRIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Step 4: quadratic sub-pixel interpolation
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def subpixel_quadratic(cost_minus: np.ndarray, cost: np.ndarray, cost_plus: np.ndarray) -> np.ndarray:
+    """Step 4 (paper: "subpixel disparities are computed by quadratic interpolation of SAD scores").
+
+    Vertex of the parabola through ``(-1, cost_minus), (0, cost), (1, cost_plus)``: an offset in [-0.5, 0.5] px when
+    ``cost`` is the smallest of the three, NaN where the three scores are flat (no curvature).
+    """
+    cm = np.asarray(cost_minus, dtype=np.float64)
+    cp = np.asarray(cost_plus, dtype=np.float64)
+    curvature = cm + cp - 2.0 * np.asarray(cost, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        offset = (cm - cp) / (2.0 * curvature)
+    return np.where(curvature > 0, offset, np.float32(np.nan)).astype(np.float32)
+
+
+def subpixel(
+    cost_minus: np.ndarray, cost: np.ndarray, cost_plus: np.ndarray, curvature: np.ndarray, offset: np.ndarray
+) -> None:
+    """:func:`subpixel_quadratic` for integer SAD scores in float32 (differences exact): fills ``curvature``
+    (cm + cp - 2 c) and ``offset`` (meaningful where 0 < curvature < _CURVATURE_LIMIT)."""
+    cv2.add(cost_minus, cost_plus, dst=curvature)
+    cv2.scaleAdd(cost, -2.0, curvature, dst=curvature)
+    cv2.divide(cv2.subtract(cost_minus, cost_plus, dst=offset), curvature, dst=offset, scale=0.5)
