@@ -131,7 +131,9 @@ def check_vo_result(res: object) -> None:
     if not isinstance(M, np.ndarray) or M.shape != (4, 4) or not np.all(np.isfinite(M)):
         raise PluginContractError("motion_rover", f"expected a finite 4x4 array when status is 'ok', got {M!r:.80}")
     if not _is_rotation(M[:3, :3]) or not np.allclose(M[3], [0, 0, 0, 1]):
-        raise PluginContractError("motion_rover", "not a rigid transform (rotation not orthonormal or last row != 0001)")
+        raise PluginContractError(
+            "motion_rover", "not a rigid transform (rotation not orthonormal or last row != 0001)"
+        )
     C = res.covariance  # type: ignore[attr-defined]
     if C is not None:
         if not isinstance(C, np.ndarray) or C.shape != (6, 6) or not np.all(np.isfinite(C)):

@@ -53,3 +53,12 @@ class SchedulerUnreachable(RoverSimError):
             f"no Dask scheduler at {address} ({detail}). Start one with `dask scheduler` and workers with "
             f"`dask worker {address}` on machines that have rover-sim installed"
         )
+
+
+class PluginError(RoverSimError):
+    """A user-supplied stereo matcher, visual odometer or planner could not be loaded, raised, or answered outside
+    its protocol (``nav.protocols``); names the plugin, the method or field, and what was wrong."""
+
+    def __init__(self, plugin: str, where: str, problem: str) -> None:
+        self.plugin, self.where, self.problem = plugin, where, problem
+        super().__init__(f"plugin {plugin}: {where}: {problem}")

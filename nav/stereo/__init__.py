@@ -59,6 +59,7 @@ from nav.stereo.checks import (
     speckle_mask,
     uniqueness_mask,
 )
+from nav.stereo.matcher import SadStereo, range_image_with
 from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
 from nav.stereo.pipeline import (
     compute_disparity,
@@ -72,6 +73,8 @@ from nav.stereo.pipeline import (
 from nav.stereo.sad import subpixel_quadratic
 
 __all__ = [
+    "SadStereo",
+    "range_image_with",
     "RangeImage",
     "RowWindow",
     "SadSearch",

@@ -12,8 +12,9 @@ import math
 from pathlib import Path
 
 from rover_sim.bench import write_json
-from rover_sim.mission.pipeline import Metrics, run_scenario
-from rover_sim.mission.scenario import catalogue, load_scenario
+from rover_sim.mission import acceptance
+from rover_sim.mission.run import Metrics, run_scenario
+from rover_sim.mission.scenario import catalogue, load_scenario, plugin_overrides
 from rover_sim.resources import suite_baseline_path
 
 BASELINE = suite_baseline_path()
@@ -35,40 +36,67 @@ def _fmt(v) -> str:
     return f"{v:.2f}" if isinstance(v, float) else str(v)
 
 
-def bench_vo(json_path: str | None = None, out_root: Path = Path("runs/bench_vo")) -> dict:
-    """The issue's VO cases; prints the table with the acceptance figures beside the measurements."""
-    results: dict[str, dict] = {}
-    for case, scenario in VO_CASES.items():
-        m = run_scenario(scenario, out_root / case, record=False)
-        results[case] = {
-            "distance_m": m.distance_m,
-            "dr_error_pct": m.dr_error_pct,
-            "vo_error_pct": m.vo_error_pct,
-            "vo_convergence_pct": m.vo_convergence_pct,
-            "false_positives": m.false_positives,
-            "max_slip_pct": m.max_slip_pct,
-            "vo_step_ms_median": m.vo_step_ms_median,
-            "passed": m.passed,
-        }
-    accept = {
-        "msstb": "VO < 1 %, DR > 10 %, slip >= 50 %",
-        "slope30m": "VO <= 1 %, convergence >= 97 %",
-        "featureless": "0 false positives",
-        "shadow": "0 false positives",
+def _vo_case(scenario: str, out_dir: Path, overrides: list[str]) -> dict:
+    m = run_scenario(scenario, out_dir, record=False, overrides=overrides)
+    return {
+        "distance_m": m.distance_m,
+        "dr_error_pct": m.dr_error_pct,
+        "vo_error_pct": m.vo_error_pct,
+        "vo_convergence_pct": m.vo_convergence_pct,
+        "false_positives": m.false_positives,
+        "max_slip_pct": m.max_slip_pct,
+        "vo_step_ms_median": m.vo_step_ms_median,
+        "passed": m.passed,
+        "reason": m.reason,
     }
+
+
+def bench_vo(
+    json_path: str | None = None,
+    out_root: Path = Path("runs/bench_vo"),
+    plugins: list[str] | None = None,
+    cases: list[str] | None = None,
+) -> dict:
+    """The issue's VO cases with MER VO, then with each plugin VO (``plugins``: import paths or entry-point names);
+    prints one table with the acceptance (each scenario's own ``[pass]``) beside the measurements."""
+    chosen = {c: s for c, s in VO_CASES.items() if cases is None or c in cases}
+    results: dict = {case: _vo_case(sc, out_root / case, []) for case, sc in chosen.items()}
+    runs = {"MER VO (builtin)": results}
+    if plugins:
+        results["plugins"] = {}
+        for plugin in plugins:
+            per = {
+                case: _vo_case(sc, out_root / "plugins" / plugin.replace(":", "_") / case, plugin_overrides(vo=plugin))
+                for case, sc in chosen.items()
+            }
+            results["plugins"][plugin] = per
+            runs[plugin] = per
     print(
-        "| case | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | false pos. "
+        "| VO | case | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | false pos. "
         "| VO ms/step | acceptance | pass |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---|:-:|")
-    for case, r in results.items():
-        print(
-            f"| {case} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | "
-            f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {r['false_positives']} | "
-            f"{_fmt(r['vo_step_ms_median'])} | {accept[case]} | {'yes' if r['passed'] else 'NO'} |"
-        )
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---|:-:|")
+    for vo_name, per in runs.items():
+        for case, r in per.items():
+            if case == "plugins":
+                continue
+            accept = acceptance.describe(load_scenario(chosen[case]).passing)
+            print(
+                f"| {vo_name} | {case} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | "
+                f"{_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | "
+                f"{r['false_positives']} | {_fmt(r['vo_step_ms_median'])} | {accept} | "
+                f"{'yes' if r['passed'] else 'NO'} |"
+            )
     write_json(json_path, results)
     return results
+
+
+def all_passed(results: dict) -> bool:
+    """Every case of the built-in and of every plugin met its criteria."""
+    ok = all(r["passed"] for c, r in results.items() if c != "plugins")
+    for per in results.get("plugins", {}).values():
+        ok &= all(r["passed"] for r in per.values())
+    return ok
 
 
 def _regressions(m: Metrics, base: dict | None) -> list[str]:
@@ -94,17 +122,21 @@ def bench_suite(
     fast: bool = False,
     out_root: Path = Path("runs/bench_suite"),
     update_baseline: bool = False,
+    overrides: list[str] | None = None,
+    label: str = "builtin",
 ) -> tuple[list[dict], bool]:
-    """Run the catalogue (``fast``: the CI subset); markdown table; (rows, ok)."""
+    """Run the catalogue (``fast``: the CI subset), with ``overrides`` (e.g. a plugin VO); markdown table;
+    (rows, ok). The baseline regression check applies to the built-in stack only (``label == "builtin"``)."""
     names = [n for n in catalogue() if not fast or load_scenario(n).fast]
     baseline = json.loads(BASELINE.read_text()) if BASELINE.is_file() else {}
     rows, ok = [], True
     for name in names:
-        m = run_scenario(name, out_root / name, record=False)
-        regress = _regressions(m, baseline.get(name))
+        m = run_scenario(name, out_root / label.replace(":", "_") / name, record=False, overrides=overrides or [])
+        regress = _regressions(m, baseline.get(name)) if label == "builtin" else []
         row = m.deterministic_dict() | {"timing": m.timing, "regressions": regress}
         rows.append(row)
         ok &= m.passed and not regress
+    print(f"stack: {label}")
     print("| scenario | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | pass | note |")
     print("|---|---:|---:|---:|---:|---:|:-:|---|")
     for r in rows:
@@ -115,7 +147,7 @@ def bench_suite(
             f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {'yes' if good else 'NO'} | {note} |"
         )
     write_json(json_path, rows)
-    if update_baseline:
+    if update_baseline and label == "builtin":
         keep = ("vo_error_pct", "vo_convergence_pct", "false_positives", "dr_error_pct", "max_slip_pct")
         merged = baseline | {r["scenario"]: {k: r[k] for k in keep} for r in rows}
         BASELINE.parent.mkdir(parents=True, exist_ok=True)

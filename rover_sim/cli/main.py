@@ -15,6 +15,12 @@ bench_app = typer.Typer(help="Benchmarks: print a markdown table, optionally wri
 app.add_typer(bench_app, name="bench")
 
 JsonOpt = Annotated[Path | None, typer.Option("--json", help="Write the results as JSON to this path.")]
+_IMPL = "an import path 'pkg.module:Class' or an entry point in 'rover_sim.plugins'"
+VoOpt = Annotated[str | None, typer.Option("--vo", help=f"Visual odometer: {_IMPL} (nav.protocols.VisualOdometer).")]
+StereoOpt = Annotated[
+    str | None, typer.Option("--stereo", help=f"Stereo matcher: {_IMPL} (nav.protocols.StereoMatcher).")
+]
+PlannerOpt = Annotated[str | None, typer.Option("--planner", help=f"Planner: {_IMPL} (nav.protocols.Planner).")]
 
 
 def _fail(err: Exception) -> None:
@@ -71,12 +77,29 @@ def bench_autonav_cmd(
     first_seed: Annotated[int, typer.Option(help="Seed of the first field.")] = 0,
     seed: Annotated[list[int] | None, typer.Option(help="Run only these seeds (repeatable).")] = None,
     workers: Annotated[int, typer.Option(help="Fields run at once (spawn pool; cycle times then share cores).")] = 1,
+    stereo: StereoOpt = None,
+    planner: PlannerOpt = None,
+    vo: VoOpt = None,
 ) -> None:
-    """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away)."""
+    """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away); with --planner,
+    --stereo or --vo the same fields run again with those parts swapped in."""
     from rover_sim.bench.autonav import bench_autonav
+    from rover_sim.mission.scenario import plugin_overrides
 
-    r = bench_autonav(str(json) if json else None, runs=runs, first_seed=first_seed, workers=workers, seeds=seed)
-    if r["reached"] < 0.95 * r["runs"] or r["collisions"] > 0:
+    path = str(json) if json else None
+    try:
+        r = bench_autonav(path, runs=runs, first_seed=first_seed, workers=workers, seeds=seed)
+        ok = r["passed"]
+        overrides = plugin_overrides(vo, stereo, planner)
+        if overrides:
+            label = ", ".join(x for x in (vo, stereo, planner) if x)
+            plugin_path = str(Path(path).with_suffix(".plugins.json")) if path else None
+            rp = bench_autonav(plugin_path, runs=runs, first_seed=first_seed, workers=workers, seeds=seed,
+                               overrides=tuple(overrides), label=label)  # fmt: skip
+            ok &= rp["passed"]
+    except RoverSimError as e:
+        _fail(e)
+    if not ok:
         raise typer.Exit(code=1)
 
 
@@ -145,12 +168,24 @@ def render_cmd(
 
 
 @bench_app.command("vo")
-def bench_vo_cmd(json: JsonOpt = None) -> None:
-    """VO cases of the issue: MSSTB rock course, 30 m slope, featureless soil, rover shadow."""
-    from rover_sim.bench.missions import bench_vo
+def bench_vo_cmd(
+    json: JsonOpt = None,
+    vo: Annotated[
+        list[str] | None, typer.Option("--vo", help=f"Also run this visual odometer ({_IMPL}); repeatable.")
+    ] = None,
+    case: Annotated[list[str] | None, typer.Option("--case", help="Only these cases (repeatable).")] = None,
+) -> None:
+    """VO cases: MSSTB rock course, 30 m slope, featureless soil, rover shadow; MER VO beside any --vo plugins."""
+    from rover_sim.bench.missions import VO_CASES, all_passed, bench_vo
 
-    results = bench_vo(str(json) if json else None)
-    if not all(r["passed"] for r in results.values()):
+    for c in case or []:
+        if c not in VO_CASES:
+            _fail(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
+    try:
+        results = bench_vo(str(json) if json else None, plugins=vo or None, cases=case or None)
+    except RoverSimError as e:
+        _fail(e)
+    if not all_passed(results):
         raise typer.Exit(code=1)
 
 
@@ -161,11 +196,28 @@ def bench_suite_cmd(
     update_baseline: Annotated[
         bool, typer.Option("--update-baseline", help="Store these results as baseline.")
     ] = False,
+    vo: VoOpt = None,
+    stereo: StereoOpt = None,
+    planner: PlannerOpt = None,
 ) -> None:
-    """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline."""
-    from rover_sim.bench.missions import bench_suite
+    """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline.
 
-    _, ok = bench_suite(str(json) if json else None, fast=fast, update_baseline=update_baseline)
+    With --vo/--stereo/--planner the catalogue runs a second time with those parts swapped in, and both tables
+    print (the plugin stack is judged by each scenario's criteria; the baseline gates the built-in stack)."""
+    from rover_sim.bench.missions import bench_suite
+    from rover_sim.mission.scenario import plugin_overrides
+
+    path = str(json) if json else None
+    try:
+        _, ok = bench_suite(path, fast=fast, update_baseline=update_baseline)
+        overrides = plugin_overrides(vo, stereo, planner)
+        if overrides:
+            label = ", ".join(x for x in (vo, stereo, planner) if x)
+            plugin_path = str(Path(path).with_suffix(".plugins.json")) if path else None
+            _, ok_plugin = bench_suite(plugin_path, fast=fast, overrides=overrides, label=label)
+            ok &= ok_plugin
+    except RoverSimError as e:
+        _fail(e)
     if not ok:
         raise typer.Exit(code=1)
 
@@ -181,12 +233,17 @@ def run_cmd(
     set_: SetOpt = None,
     record: Annotated[bool, typer.Option("--record/--no-record", help="Write DIR/recording.rrd.")] = True,
     progress: Annotated[bool, typer.Option("--progress/--no-progress")] = True,
+    vo: VoOpt = None,
+    stereo: StereoOpt = None,
+    planner: PlannerOpt = None,
 ) -> None:
     """Run a mission scenario: writes recording.rrd, metrics.json, trajectories/*.tum, plots/*.png."""
-    from rover_sim.mission.pipeline import run_scenario
+    from rover_sim.mission.run import run_scenario
+    from rover_sim.mission.scenario import plugin_overrides
 
+    overrides = plugin_overrides(vo, stereo, planner) + list(set_ or [])
     try:
-        metrics = run_scenario(scenario, out, seed=seed, overrides=set_ or [], record=record, progress=progress)
+        metrics = run_scenario(scenario, out, seed=seed, overrides=overrides, record=record, progress=progress)
     except RoverSimError as e:
         _fail(e)
     colour = typer.colors.GREEN if metrics.passed else typer.colors.RED

@@ -14,6 +14,9 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from nav.gestalt import GestaltParams
+from nav.stereo import StereoParams
+from nav.vo import SanityConstraints, VoParams
 from rover_sim.errors import ConfigError
 from rover_sim.resources import scenarios_dir
 from terrains import TerrainRecipe
@@ -45,8 +48,74 @@ class StartSpec(_Spec):
     yaw_deg: float = Field(0.0, ge=-360.0, le=360.0, description="Heading from +x toward +y.")
 
 
+BUILTIN = "builtin"
+IMPL_DESCRIPTION = (
+    '"builtin", an import path "package.module:Class", or the name of an entry point in the group '
+    '"rover_sim.plugins"'
+)
+
+
+def _split_params(data: Any, own: tuple[str, ...], shorthand: str | None) -> Any:
+    """Let a ``[nav.<part>]`` table hold its algorithm parameters flat (``--set nav.vo.window_px=9``).
+
+    Keys that are not the part's own settings go into ``params``; a bare bool or string is shorthand for
+    ``enabled`` or ``impl`` (``[nav] vo = false``, ``vo = "mypkg.vo:MyVO"``).
+    """
+    if isinstance(data, bool) and shorthand == "enabled":
+        return {"enabled": data}
+    if isinstance(data, str):
+        return {"impl": data}
+    if not isinstance(data, dict):
+        return data
+    out = {k: v for k, v in data.items() if k in own or k == "params"}
+    flat = {k: v for k, v in data.items() if k not in out}
+    if flat:
+        out["params"] = {**(out.get("params") or {}), **flat}
+    return out
+
+
+class VoSpec(_Spec):
+    """``[nav.vo]``: visual odometry on/off, which implementation, its parameters and MER's sanity constraints."""
+
+    enabled: bool = Field(True, description="Visual odometry on (MER used it on slopes and in sand).")
+    impl: str = Field(BUILTIN, min_length=1, description=IMPL_DESCRIPTION)
+    sanity: SanityConstraints = Field(default_factory=SanityConstraints)
+    params: VoParams = Field(default_factory=VoParams)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _flat(cls, data: Any) -> Any:
+        return _split_params(data, ("enabled", "impl", "sanity"), "enabled")
+
+
+class StereoSpec(_Spec):
+    """``[nav.stereo]``: the dense stereo used for autonav ranging and the recording's depth."""
+
+    impl: str = Field(BUILTIN, min_length=1, description=IMPL_DESCRIPTION)
+    params: StereoParams = Field(default_factory=StereoParams)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _flat(cls, data: Any) -> Any:
+        return _split_params(data, ("impl",), None)
+
+
+class PlannerSpec(_Spec):
+    """``[nav.planner]``: the autonav planner (GESTALT by default) and its parameters."""
+
+    impl: str = Field(BUILTIN, min_length=1, description=IMPL_DESCRIPTION)
+    params: GestaltParams = Field(default_factory=GestaltParams)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _flat(cls, data: Any) -> Any:
+        return _split_params(data, ("impl",), None)
+
+
 class NavSpec(_Spec):
-    vo: bool = Field(True, description="Visual odometry on (MER used it on slopes and in sand).")
+    vo: VoSpec = Field(default_factory=VoSpec)
+    stereo: StereoSpec = Field(default_factory=StereoSpec)
+    planner: PlannerSpec = Field(default_factory=PlannerSpec)
     vo_step_m: float = Field(0.35, gt=0.05, le=0.75, description="Drive between VO images (MER: <= 75 cm).")
     camera: Literal["navcam", "hazcam_front"] = "navcam"
     resolution_px: int = Field(256, ge=64, le=1024, description="Navigation image size (MER binned to 256).")
@@ -231,8 +300,34 @@ def _describe(err: ValidationError) -> tuple[str, str]:
     return loc, msg
 
 
+def _normalise_nav(tree: dict) -> None:
+    """``[nav] vo = false`` / ``vo = "pkg.mod:Class"`` shorthands become tables, so ``--set nav.vo.x=...`` works."""
+    nav = tree.get("nav")
+    if not isinstance(nav, dict):
+        return
+    for part in ("vo", "stereo", "planner"):
+        value = nav.get(part)
+        if isinstance(value, bool) and part == "vo":
+            nav[part] = {"enabled": value}
+        elif isinstance(value, str):
+            nav[part] = {"impl": value}
+
+
+def plugin_overrides(vo: str | None = None, stereo: str | None = None, planner: str | None = None) -> list[str]:
+    """``--set`` overrides that select the given implementations (``--vo`` also turns VO on)."""
+    out = []
+    if vo:
+        out += ["nav.vo.enabled=true", f'nav.vo.impl="{vo}"']
+    if stereo:
+        out.append(f'nav.stereo.impl="{stereo}"')
+    if planner:
+        out.append(f'nav.planner.impl="{planner}"')
+    return out
+
+
 def scenario_from_dict(data: dict, source: str = "<dict>", overrides: list[str] | None = None) -> Scenario:
     tree = json.loads(json.dumps(data))  # deep copy of plain data
+    _normalise_nav(tree)
     for text in overrides or []:
         key, value = parse_override(text)
         _set_dotted(tree, key, value)

@@ -50,6 +50,7 @@ from nav.rocks import (
     panorama_points,
     voxel_downsample,
 )
+from rover_sim.mission.onboard import VoStep
 from rover_sim.mission.pipeline import Mission
 from rover_sim.mission.scenario import GotoCmd, Scenario
 from rover_sim.sim.drive import TICK_S
@@ -141,27 +142,19 @@ class RockSiteSurvey:
         self._last_distance_m = 0.0
         self._last_t_s = 0.0
         self._leg_cov = np.zeros((3, 3))
-        if self.mission.vo is not None:
-            self.mission.vo.step = self._vo_step_with_covariance(self.mission.vo.step)
+        self.mission.vo_listeners.append(self._add_leg_covariance)
 
-    def _vo_step_with_covariance(self, step: Callable) -> Callable:
-        """Wrap the mission's VO step: sum, over the leg, the position covariance VO reports for every step it
-        accepts (rotated into the world by the attitude at the previous pair), and the wheel odometry's for a step it
-        refuses. The chain adjustment weighs the leg by it (VO's own error model, not the truth)."""
-
-        def wrapped(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-            res = step(*args, **kwargs)
-            R = kwargs.get("R_world_rover")
-            R = np.eye(3) if R is None else np.asarray(R, dtype=float)
-            if res.ok and res.covariance is not None:
-                self._leg_cov += R @ np.asarray(res.covariance)[:3, :3] @ R.T
-            elif res.status != "first_frame":
-                pred = args[3] if len(args) > 3 else kwargs.get("predicted_motion_rover")
-                d = 0.0 if pred is None else float(np.linalg.norm(np.asarray(pred)[:3, 3]))
-                self._leg_cov += (VO_FAILED_STEP_SIGMA_FRAC * d) ** 2 * np.eye(3)
-            return res
-
-        return wrapped
+    def _add_leg_covariance(self, step: VoStep, _T_rover_cam: np.ndarray) -> None:
+        """Sum, over the leg, the position covariance VO reports for every step it accepts (rotated into the world
+        by the attitude at the previous pair), and the wheel odometry's for a step it refuses. The chain adjustment
+        weighs the leg by it (VO's own error model, not the truth)."""
+        res = step.result
+        R = np.asarray(step.R_world_rover_prev, dtype=float)
+        if res.status == "ok" and res.covariance is not None:
+            self._leg_cov += R @ np.asarray(res.covariance)[:3, :3] @ R.T
+        elif res.status != "first_frame":
+            d = float(np.linalg.norm(np.asarray(step.predicted_motion_rover)[:3, 3]))
+            self._leg_cov += (VO_FAILED_STEP_SIGMA_FRAC * d) ** 2 * np.eye(3)
 
     @property
     def terrain(self) -> Terrain:
@@ -169,8 +162,7 @@ class RockSiteSurvey:
 
     def close(self) -> None:
         self.renderer.close()
-        self.mission.renderer.close()
-        self.mission.sensors.detach()
+        self.mission.close()
 
     def __enter__(self) -> RockSiteSurvey:
         return self
@@ -182,15 +174,15 @@ class RockSiteSurvey:
     def run(self, max_sites: int | None = None) -> list[SiteSurvey]:
         """Survey the start site, then drive each ``goto`` and survey its end; returns the sites."""
         m = self.mission
-        m._tick(m.sim)
-        if m.vo is not None:
-            m._vo_update()  # the first pair initialises VO
+        m.tick()
+        if m.onboard.vo is not None:
+            m.vo_update()  # the first pair initialises VO
         self.survey_site()
         for cmd in self.sc.commands:
             if max_sites is not None and len(self.sites) >= max_sites:
                 break
             t0 = time.perf_counter()
-            m._run_command(cmd)
+            m.run_command(cmd)
             if isinstance(cmd, GotoCmd):
                 self.progress(f"drove to site {len(self.sites)} in {time.perf_counter() - t0:.0f} s")
                 self.survey_site(drive_s=time.perf_counter() - t0)
@@ -203,7 +195,7 @@ class RockSiteSurvey:
         sim = m.sim
         self._stand(REST_BEFORE_PANORAMA_S)
         T_onboard = m.onboard.pose.as_matrix()  # the panorama is mapped through this estimate
-        T_dr = m.dr.pose.as_matrix()
+        T_dr = m.onboard.dead_reckoning.pose.as_matrix()
         T_true = np.eye(4)  # evaluation only
         T_true[:3, :3] = quat_wxyz_to_R(sim.quat_wxyz())
         T_true[:3, 3] = sim.position_m()
@@ -211,16 +203,17 @@ class RockSiteSurvey:
         for elevation in cfg.elevations_deg:
             for pan in self._pans():
                 self._point_mast(pan, elevation)
+                rig = self.renderer.rig("navcam")  # calibrated at the commanded pointing, once settled
                 t0 = time.perf_counter()
                 frame = self.renderer.render_pair("navcam")
                 t1 = time.perf_counter()
-                pts = panorama_points(frame.left, frame.right, frame.rig, cfg.stereo)
+                pts = panorama_points(frame.left, frame.right, rig, cfg.stereo)
                 timings["render"] += t1 - t0
                 timings["stereo"] += time.perf_counter() - t1
                 body = (np.abs(pts[:, 0]) < ROVER_BOX_HALF_M[0]) & (np.abs(pts[:, 1]) < ROVER_BOX_HALF_M[1])
                 pts = pts[~body]
                 clouds.append(voxel_downsample(pts @ T_onboard[:3, :3].T + T_onboard[:3, 3], cfg.voxel_m))
-                sensors.append(T_onboard[:3, :3] @ frame.rig.left.T_rover_cam[:3, 3] + T_onboard[:3, 3])
+                sensors.append(T_onboard[:3, :3] @ rig.left.T_rover_cam[:3, 3] + T_onboard[:3, 3])
                 self.progress(f"site {len(self.sites)}: pan {pan:+.0f} deg, {len(pts)} points")
         self._point_mast(self.sc.nav.mast_pan_deg, self.sc.nav.mast_tilt_deg)  # back to the navigation pointing
         sensor = np.mean(sensors, axis=0)
@@ -236,7 +229,7 @@ class RockSiteSurvey:
             T_world_rover_true=T_true,
             T_world_rover_dr=T_dr,
             T_world_rover_onboard=T_onboard,
-            driven_m=m.onboard.distance_m - self._last_distance_m,
+            driven_m=m.onboard.estimator.distance_m - self._last_distance_m,
             leg_s=sim.time_s - self._last_t_s,
             odometry_cov_m2=self._leg_cov.copy(),
             sensor_xyz_m=sensor,
@@ -245,7 +238,7 @@ class RockSiteSurvey:
             timings_s=timings,
             points=cloud if self.keep_points else None,
         )
-        self._last_distance_m = m.onboard.distance_m
+        self._last_distance_m = m.onboard.estimator.distance_m
         self._last_t_s = sim.time_s
         self._leg_cov = np.zeros((3, 3))
         self.sites.append(site)
@@ -259,18 +252,12 @@ class RockSiteSurvey:
 
     def _stand(self, duration_s: float) -> None:
         """Let the rover stand still (wheels idle) for ``duration_s``; the onboard estimators keep running."""
-        m = self.mission
-        for _ in range(int(round(duration_s / TICK_S))):
-            m.sim.step(None, int(round(TICK_S / m.sim.timestep_s)))
-            m._tick(m.sim)
+        self.mission.stand(duration_s, TICK_S)
 
     def _point_mast(self, pan_deg: float, elevation_deg: float) -> None:
-        """Point the navcams (elevation: up positive; the tilt joint is its negative) and let the mast settle."""
-        m = self.mission
-        m.sim.set_mast(math.radians(pan_deg), -math.radians(elevation_deg))
-        for _ in range(int(round(MAST_SETTLE_S / TICK_S))):
-            m.sim.step(None, int(round(TICK_S / m.sim.timestep_s)))
-            m._tick(m.sim)
+        """Point the navcams (pan left positive, elevation up positive) and let the mast settle."""
+        self.mission.world.point_mast(pan_deg, elevation_deg)
+        self.mission.stand(MAST_SETTLE_S, TICK_S)
 
 
 # ================================================================================================================

@@ -36,7 +36,7 @@ def rock_run():
     try:
         metrics = mission.run()
     finally:
-        mission.renderer.close()
+        mission.close()
     return mission, metrics
 
 

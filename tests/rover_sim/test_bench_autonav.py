@@ -38,5 +38,5 @@ def test_fields_hold_the_rock_population_the_issue_names(seed: int) -> None:
 
 def test_fields_drive_on_the_onboard_pose_with_navcam_vo() -> None:
     sc = scenario_from_dict(field_scenario(3))
-    assert sc.nav.vo and sc.nav.camera == "navcam"
+    assert sc.nav.vo.enabled and sc.nav.camera == "navcam"
     assert sc.commands[0].type == "autonav"

@@ -9,7 +9,8 @@ import pytest
 
 from nav.trajectory import read_tum
 from rover_sim.io.recording import entity_row_counts
-from rover_sim.mission.pipeline import Mission, run_scenario
+from rover_sim.mission.pipeline import Mission
+from rover_sim.mission.run import run_scenario
 from rover_sim.mission.scenario import scenario_from_dict
 
 TINY = {
@@ -112,4 +113,4 @@ def test_interrupt_stops_cleanly_and_keeps_what_was_recorded(tmp_path):
     finally:
         mission.renderer.close()
     assert not m.passed and "interrupted" in m.reason
-    assert len(mission.truth) >= 19
+    assert len(mission.evaluator.truth) >= 19

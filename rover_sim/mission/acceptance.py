@@ -1,0 +1,162 @@
+"""Every pass criterion in one place: the scenario judge and the benchmarks' acceptance bars.
+
+A scenario's own criteria live in its ``[pass]`` table (:class:`rover_sim.mission.scenario.PassSpec`) and are
+judged by :func:`judge`; the benchmarks' bars are the constants below (each with the issue or paper it comes from).
+The CLI and the benchmark modules read them from here and nowhere else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from rover_sim.mission.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
+from rover_sim.mission.evaluator import Metrics
+from rover_sim.mission.scenario import KeepOut, PassSpec
+
+TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
+FALSE_POSITIVE_M = EVAL_FALSE_POSITIVE_M  # an accepted VO update off by more than this is a false positive
+
+
+@dataclass(frozen=True)
+class AutonavBar:
+    """``bench autonav``: reach the goal on >= 95 % of fields, never touch a tall rock, plan within 50 ms."""
+
+    min_reached_frac: float = 0.95
+    max_collisions: int = 0
+    max_cycle_ms: float = 50.0
+
+
+@dataclass(frozen=True)
+class StereoBar:
+    """``bench stereo``: at most 1.5x StereoBM's time, fewer bad-1px pixels than StereoBM."""
+
+    max_time_ratio: float = 1.5
+
+
+@dataclass(frozen=True)
+class RenderBar:
+    """``bench render``: a 256x256 navcam pair with shadows within 40 ms."""
+
+    max_pair_256_shadows_ms: float = 40.0
+
+
+@dataclass(frozen=True)
+class DimesBar:
+    """``bench dimes``: 1-sigma horizontal velocity error <= 1.5 m/s (MER DIMES requirement), >= 50 descents."""
+
+    max_velocity_error_1sigma_m_s: float = 1.5
+    min_runs: int = 50
+
+
+@dataclass(frozen=True)
+class RocksBar:
+    """``bench rocks`` (seed 004): extraction, modelling, matching and site-to-site error."""
+
+    recall: float = 0.90
+    precision: float = 0.90
+    median_rms_m: float = 0.04
+    match_correct_frac: float = 0.90
+    site_error_pct: float = 2.0
+    model_type_match_frac_well_observed: float = 0.80
+
+
+@dataclass(frozen=True)
+class SweepBar:
+    """``bench sweep``: two workers take at most 0.65 of the serial wall time."""
+
+    max_parallel_ratio: float = 0.65
+
+
+AUTONAV = AutonavBar()
+STEREO = StereoBar()
+RENDER = RenderBar()
+DIMES = DimesBar()
+ROCKS = RocksBar()
+SWEEP = SweepBar()
+
+
+def describe(p: PassSpec) -> str:
+    """The scenario's criteria as one line (for benchmark tables)."""
+    parts = []
+    if p.max_vo_error_pct is not None:
+        parts.append(f"VO <= {p.max_vo_error_pct:g} %")
+    if p.min_dr_error_pct is not None:
+        parts.append(f"DR >= {p.min_dr_error_pct:g} %")
+    if p.max_dr_error_pct is not None:
+        parts.append(f"DR <= {p.max_dr_error_pct:g} %")
+    if p.min_vo_convergence_pct is not None:
+        parts.append(f"convergence >= {p.min_vo_convergence_pct:g} %")
+    if p.min_max_slip_pct is not None:
+        parts.append(f"slip >= {p.min_max_slip_pct:g} %")
+    if p.max_max_slip_pct is not None:
+        parts.append(f"slip <= {p.max_max_slip_pct:g} %")
+    if p.max_false_positives is not None:
+        parts.append(f"{p.max_false_positives} false positives")
+    if p.expect_halt is not None:
+        parts.append(f"{p.expect_halt} halt")
+    if p.goal_within_m is not None:
+        parts.append(f"goal within {p.goal_within_m:g} m")
+    if p.max_body_collisions is not None:
+        parts.append(f"<= {p.max_body_collisions} collisions")
+    return ", ".join(parts) or "runs to completion"
+
+
+def judge(
+    m: Metrics, p: PassSpec, *, error: str | None, keep_out_info: dict | None, keep_out: list[KeepOut]
+) -> tuple[bool, str]:
+    """Pass/fail of one run against its scenario's ``[pass]`` criteria; the reason names every unmet bound."""
+    if error:
+        return False, f"run did not complete: {error}"
+    fails: list[str] = []
+
+    def need(ok: bool, text: str) -> None:
+        if not ok:
+            fails.append(text)
+
+    if p.max_vo_error_pct is not None:
+        need(
+            m.vo_error_pct is not None and m.vo_error_pct <= p.max_vo_error_pct,
+            f"VO error {m.vo_error_pct} % > {p.max_vo_error_pct} %",
+        )
+    if p.min_dr_error_pct is not None:
+        need(m.dr_error_pct >= p.min_dr_error_pct, f"DR error {m.dr_error_pct} % < {p.min_dr_error_pct} %")
+    if p.max_dr_error_pct is not None:
+        need(m.dr_error_pct <= p.max_dr_error_pct, f"DR error {m.dr_error_pct} % > {p.max_dr_error_pct} %")
+    if p.min_vo_convergence_pct is not None:
+        need(
+            m.vo_convergence_pct is not None and m.vo_convergence_pct >= p.min_vo_convergence_pct,
+            f"VO convergence {m.vo_convergence_pct} % < {p.min_vo_convergence_pct} %",
+        )
+    if p.min_max_slip_pct is not None:
+        need(m.max_slip_pct >= p.min_max_slip_pct, f"max slip {m.max_slip_pct} % < {p.min_max_slip_pct} %")
+    if p.max_max_slip_pct is not None:
+        need(m.max_slip_pct <= p.max_max_slip_pct, f"max slip {m.max_slip_pct} % > {p.max_max_slip_pct} %")
+    if p.max_false_positives is not None:
+        need(
+            m.false_positives <= p.max_false_positives,
+            f"{m.false_positives} VO false positives > {p.max_false_positives}",
+        )
+    if p.expect_halt is not None:
+        need(m.halted == p.expect_halt, f"expected a {p.expect_halt} halt, got {m.halted}")
+    elif m.halted is not None:
+        fails.append(f"unexpected {m.halted} halt")
+    if p.expect_dead_reckoning_clear:
+        info = keep_out_info
+        need(
+            info is not None
+            and info["dead_reckoning_distance_m"] > info["onboard_distance_m"] + 0.1
+            and any(info["dead_reckoning_distance_m"] >= z.radius_m for z in keep_out),
+            "dead reckoning did not believe the rover clear at the keep-out halt",
+        )
+    if p.goal_within_m is not None:
+        need(
+            m.goal_distance_m is not None and m.goal_distance_m <= p.goal_within_m,
+            f"ended {m.goal_distance_m} m from the goal (> {p.goal_within_m} m)",
+        )
+    if p.max_body_collisions is not None:
+        need(m.body_collisions <= p.max_body_collisions, f"{m.body_collisions} body-collision ticks")
+        need(
+            m.tall_rock_contacts <= p.max_body_collisions,
+            f"{m.tall_rock_contacts} ticks touching rocks taller than {TALL_ROCK_M} m",
+        )
+    return (not fails, "; ".join(fails) if fails else "all criteria met")

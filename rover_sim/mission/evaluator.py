@@ -1,0 +1,232 @@
+"""The evaluator: the only part of a run that sees ground truth beside the estimates, and the one that scores them.
+
+The pipeline hands it, at every tick, the true pose next to the onboard estimates, the contacts, and each VO step's
+outcome with the true motion over the same interval; :meth:`Evaluator.metrics` turns them into :class:`Metrics`
+and :func:`rover_sim.mission.acceptance.judge` decides pass/fail against the scenario's criteria.
+
+Slip is always measured from truth: per VO step (true progress along the previous heading over the wheel
+odometry's commanded distance) when VO ran, otherwise over windows of ``SLIP_WINDOW_M`` of commanded travel from
+the true along-heading progress, so a detour's curvature is not counted as slip.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from nav.geometry import se3_inv
+from nav.trajectory import Pose, Trajectory, relative_errors
+
+FALSE_POSITIVE_M = 0.05  # an accepted VO update whose translation is off by more than this is a false positive
+SLIP_WINDOW_M = 0.35  # commanded travel per slip sample when there are no VO steps (MER's VO step)
+MIN_SLIP_TRAVEL_M = 0.05  # steps commanding less travel than this (turns in place) give no slip sample
+
+
+@dataclass
+class VoStepRecord:
+    t_s: float
+    status: str
+    commanded_m: float  # wheel-odometry distance since the previous pair
+    vo_made_good_m: float  # VO-measured progress along the previous heading (NaN if no update)
+    true_made_good_m: float
+    vo_slip: float
+    true_slip: float
+    error_m: float  # |VO translation - true translation| (NaN if no update)
+    n_inliers: int
+    ms: float
+
+
+@dataclass
+class Metrics:
+    """metrics.json (keys of the issue first, then extras)."""
+
+    scenario: str
+    seed: int
+    distance_m: float
+    dr_error_pct: float
+    vo_error_pct: float | None
+    vo_convergence_pct: float | None
+    max_slip_pct: float
+    mean_slip_pct: float
+    passed: bool
+    reason: str
+    wall_s: float
+    halted: str | None = None
+    dr_error_m: float = math.nan
+    vo_error_m: float | None = None
+    false_positives: int = 0
+    vo_steps: int = 0
+    vo_accepted: int = 0
+    max_vo_slip_pct: float | None = None
+    body_collisions: int = 0  # ticks with the body (not a wheel) touching terrain or a rock
+    tall_rock_contacts: int = 0  # ticks with any rover geom touching a rock >= TALL_ROCK_M tall
+    goal_distance_m: float | None = None
+    sim_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+    # wall-clock measurements: not deterministic, so written to timing.json rather than metrics.json
+    timing: dict = field(default_factory=dict)
+
+    @property
+    def vo_step_ms_median(self) -> float | None:
+        return self.timing.get("vo_step_ms_median")
+
+    def deterministic_dict(self) -> dict:
+        d = asdict(self)
+        d.pop("timing")
+        return d
+
+
+def window_slips(truth: list[Pose], commanded_m: list[float], window_m: float = SLIP_WINDOW_M) -> np.ndarray:
+    """Slip over consecutive windows of ``window_m`` commanded travel: 1 - true along-heading progress / commanded.
+
+    Progress is summed tick by tick along the true heading at the start of each tick (horizontal plane), so a
+    curved path driven without slip scores about 0 and turns in place contribute nothing.
+    """
+    out: list[float] = []
+    progress = commanded = 0.0
+    for k in range(1, len(truth)):
+        a, b = truth[k - 1], truth[k]
+        x_axis = a.R_world_rover[:, 0]
+        heading = x_axis[:2] / max(float(np.linalg.norm(x_axis[:2])), 1e-9)
+        progress += float(np.dot(b.position_xyz_m[:2] - a.position_xyz_m[:2], heading))
+        commanded += commanded_m[k] - commanded_m[k - 1]
+        if abs(commanded) >= window_m:
+            out.append(1.0 - progress / commanded)
+            progress = commanded = 0.0
+    return np.array(out, dtype=float)
+
+
+class Evaluator:
+    """Collects truth beside the estimates during a run; computes the metrics at the end."""
+
+    def __init__(self, scenario_name: str, seed: int, goal_xy: np.ndarray | None, has_vo: bool) -> None:
+        self.scenario_name, self.seed, self.goal_xy, self.has_vo = scenario_name, seed, goal_xy, has_vo
+        self.truth: list[Pose] = []
+        self.dr_poses: list[Pose] = []
+        self.onboard_poses: list[Pose] = []
+        self.commanded_m: list[float] = []  # wheel odometry's distance at each recorded pose
+        self.vo_steps: list[VoStepRecord] = []
+        self.body_collision_ticks = 0
+        self.tall_rock_contact_ticks = 0
+        self.keep_out_info: dict | None = None
+        self._last_frame_truth: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ during the run
+    def record(self, truth: Pose, dead_reckoning: Pose, onboard: Pose, commanded_m: float) -> None:
+        self.truth.append(truth)
+        self.dr_poses.append(dead_reckoning)
+        self.onboard_poses.append(onboard)
+        self.commanded_m.append(commanded_m)
+
+    def count_contacts(self, body_contact: bool, tall_rock_contact: bool) -> None:
+        self.body_collision_ticks += int(body_contact)
+        self.tall_rock_contact_ticks += int(tall_rock_contact)
+
+    def vo_step(
+        self, truth: Pose, status: str, motion_rover: np.ndarray | None, commanded_m: float, n_inliers: int, ms: float
+    ) -> VoStepRecord | None:
+        """Score one VO step against the true motion since the previous pair (None for the first pair)."""
+        T_truth = truth.as_matrix()
+        rec = None
+        if self._last_frame_truth is not None and status != "first_frame":
+            true_motion = se3_inv(self._last_frame_truth) @ T_truth
+            true_good = float(true_motion[0, 3])
+            vo_good, err = math.nan, math.nan
+            ok = status == "ok"
+            if ok:
+                vo_good = float(motion_rover[0, 3])
+                err = float(np.linalg.norm(motion_rover[:3, 3] - true_motion[:3, 3]))
+            rec = VoStepRecord(
+                truth.t_s,
+                status,
+                commanded_m,
+                vo_good,
+                true_good,
+                1.0 - vo_good / commanded_m if abs(commanded_m) > 1e-3 and ok else math.nan,
+                1.0 - true_good / commanded_m if abs(commanded_m) > 1e-3 else math.nan,
+                err,
+                n_inliers,
+                ms,
+            )
+            self.vo_steps.append(rec)
+        self._last_frame_truth = T_truth
+        return rec
+
+    def keep_out(self, zone_name: str, onboard_d: float, dr_d: float, true_d: float) -> dict:
+        self.keep_out_info = {
+            "zone": zone_name,
+            "onboard_distance_m": round(onboard_d, 3),
+            "dead_reckoning_distance_m": round(dr_d, 3),
+            "true_distance_m": round(true_d, 3),
+        }
+        return self.keep_out_info
+
+    # ------------------------------------------------------------------ at the end
+    def trajectories(self) -> dict[str, Trajectory]:
+        out = {"truth": Trajectory.from_poses(self.truth), "dead_reckoning": Trajectory.from_poses(self.dr_poses)}
+        if self.has_vo:
+            out["vo"] = Trajectory.from_poses(self.onboard_poses)
+        return out
+
+    def metrics(self, *, wall_s: float, sim_s: float, halted: str | None, extra: dict, timing: dict) -> Metrics:
+        tr = self.trajectories()
+        truth = tr["truth"]
+        dist = max(truth.path_length_m(), 1e-9)
+        end = truth.positions_xyz[-1]
+        dr_err = float(np.linalg.norm(tr["dead_reckoning"].positions_xyz[-1] - end))
+        vo_err = float(np.linalg.norm(tr["vo"].positions_xyz[-1] - end)) if "vo" in tr else None
+        steps = list(self.vo_steps)
+        judged = [s for s in steps if s.status not in ("first_frame", "reinit")]
+        accepted = [s for s in judged if s.status == "ok"]
+        conv = 100.0 * len(accepted) / len(judged) if judged else None
+        fps = sum(1 for s in accepted if s.error_m > FALSE_POSITIVE_M)
+        true_slips = np.array([s.true_slip for s in steps if abs(s.commanded_m) > MIN_SLIP_TRAVEL_M], dtype=float)
+        true_slips = true_slips[np.isfinite(true_slips)]
+        vo_slips = np.array([s.vo_slip for s in accepted if abs(s.commanded_m) > MIN_SLIP_TRAVEL_M], dtype=float)
+        vo_slips = vo_slips[np.isfinite(vo_slips)]
+        if len(true_slips) == 0:  # no VO steps: slip over windows of commanded travel, from the true progress
+            true_slips = window_slips(self.truth, self.commanded_m)
+            if len(true_slips) == 0:
+                true_slips = np.array([0.0])
+        ms = [s.ms for s in steps]
+        return Metrics(
+            scenario=self.scenario_name,
+            seed=self.seed,
+            distance_m=round(dist, 4),
+            dr_error_pct=round(100 * dr_err / dist, 3),
+            vo_error_pct=round(100 * vo_err / dist, 3) if vo_err is not None else None,
+            vo_convergence_pct=round(conv, 2) if conv is not None else None,
+            max_slip_pct=round(100 * float(np.max(true_slips)), 2),
+            mean_slip_pct=round(100 * float(np.mean(true_slips)), 2),
+            passed=False,
+            reason="",
+            wall_s=round(wall_s, 2),
+            halted=halted,
+            dr_error_m=round(dr_err, 4),
+            vo_error_m=round(vo_err, 4) if vo_err is not None else None,
+            false_positives=fps,
+            vo_steps=len(judged),
+            vo_accepted=len(accepted),
+            max_vo_slip_pct=round(100 * float(np.max(vo_slips)), 2) if len(vo_slips) else None,
+            body_collisions=self.body_collision_ticks,
+            tall_rock_contacts=self.tall_rock_contact_ticks,
+            goal_distance_m=round(float(np.linalg.norm(end[:2] - self.goal_xy)), 3)
+            if self.goal_xy is not None
+            else None,
+            sim_s=round(sim_s, 2),
+            extra={"kitti_translation_error_pct": self.kitti()} | extra,
+            timing={"vo_step_ms_median": round(float(np.median(ms)), 1) if ms else None} | timing,
+        )
+
+    def kitti(self) -> dict:
+        """KITTI-style mean translational error (% of segment length) over sub-segments of 1, 2, 5 and 10 m."""
+        tr = self.trajectories()
+        truth = tr.pop("truth")
+        lengths = [L for L in (1.0, 2.0, 5.0, 10.0) if L < truth.path_length_m()]
+        out = {}
+        for name, est in tr.items():
+            errs = relative_errors(est, truth, lengths, step_frames=4) if lengths else []
+            out[name] = {f"{e.length_m:g}m": round(e.translation_error_pct, 3) for e in errs}
+        return out

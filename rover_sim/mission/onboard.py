@@ -1,0 +1,172 @@
+"""The onboard stack: what flight software computed from sensor data alone (kiss-icp ``register_frame`` style).
+
+Every entry point takes an :class:`~rover_sim.mission.observation.Observation` and refuses anything else, so the
+honesty rule is a type, not a convention. Nothing here imports the simulator, the renderer or the evaluator.
+
+- :meth:`Onboard.observe`: IMU samples since the last encoder reading + the new reading -> two dead reckoners
+  (one pure wheel/IMU for comparison, one that VO corrects: the pose the rover drives on).
+- :meth:`Onboard.vo_step`: one stereo pair -> VO (seed 000 section 2) -> an accepted motion replaces the
+  dead-reckoned increment since the previous pair (MER practice); a refusal leaves dead reckoning standing.
+- :meth:`Onboard.plan`: hazcam pair(s) -> stereo range image -> points placed with the onboard pose -> GESTALT
+  (seed 001 section 4) -> the arc to drive.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from nav.camera import transform_points
+from nav.dead_reckoning import DeadReckoner
+from nav.protocols import Planner, StereoMatcher, VisualOdometer
+from nav.stereo import RangeImage, range_image_with
+from nav.trajectory import Pose
+from nav.types import ImuSample, RoverGeometry
+from rover_sim.mission.observation import Observation, require_observation
+
+# Hazcam look-ahead on MER: 3-4 m useful. At 256^2 (10 cm baseline) the disparity at 3.5 m is ~2 px and
+# elevation errors there reach 10-20 cm, as big as the steps GESTALT must see; farther points only add false rocks.
+MAX_RANGE_M = 3.5
+# The rover's own wheels are in the hazcams' view (front wheels, more so when steered): points inside the rover's
+# plan-view box (rover frame, |x| and |y| below these) are the vehicle, not terrain.
+SELF_MASK_HALF_LENGTH_M = 0.85
+SELF_MASK_HALF_WIDTH_M = 0.8
+
+
+def terrain_points(points_rover: np.ndarray) -> np.ndarray:
+    """Range points worth mapping: within ``MAX_RANGE_M`` and outside the rover's own plan-view box."""
+    xy = points_rover[:, :2]
+    own = (np.abs(xy[:, 0]) < SELF_MASK_HALF_LENGTH_M) & (np.abs(xy[:, 1]) < SELF_MASK_HALF_WIDTH_M)
+    return points_rover[(np.hypot(xy[:, 0], xy[:, 1]) < MAX_RANGE_M) & ~own]
+
+
+def heading_rad(R_world_rover: np.ndarray) -> float:
+    return float(math.atan2(R_world_rover[1, 0], R_world_rover[0, 0]))
+
+
+@dataclass(frozen=True)
+class VoStep:
+    """One VO step as the rover saw it: the result, the wheel odometry's distance since the previous pair, the
+    slip VO measured (NaN unless accepted), and the step's compute time."""
+
+    result: object  # nav.vo.VoResult (or a plugin's result honouring nav.protocols.VisualOdometer)
+    commanded_m: float
+    vo_slip: float
+    ms: float
+    predicted_motion_rover: np.ndarray  # the dead-reckoned motion VO was seeded with
+    R_world_rover_prev: np.ndarray  # onboard attitude at the previous pair
+
+
+@dataclass(frozen=True)
+class PlanCycle:
+    """One autonav cycle: the planner's decision and what it was made from (for the recording)."""
+
+    decision: object  # nav.gestalt.Decision
+    range_image: RangeImage
+    points_world: np.ndarray
+    T_world_rover: np.ndarray  # the onboard pose the points were placed with
+    ms: float
+
+
+class Onboard:
+    """Dead reckoning, visual odometry and local planning on sensor data only."""
+
+    def __init__(
+        self,
+        start_pose: Pose,
+        vo: VisualOdometer | None,
+        stereo: StereoMatcher,
+        planner_factory: Callable[[], Planner],
+        geometry: RoverGeometry | None = None,
+    ) -> None:
+        self.geometry = geometry or RoverGeometry()
+        self.dead_reckoning = DeadReckoner(self.geometry, start_pose)  # wheels + IMU only, for comparison
+        self.estimator = DeadReckoner(self.geometry, start_pose)  # corrected by VO: the pose the rover drives on
+        self.vo = vo
+        self.stereo = stereo
+        self.planner_factory = planner_factory
+        self.planner: Planner | None = None
+        self._imu_pending: list[ImuSample] = []
+        self._last_frame_distance_m = 0.0
+
+    @property
+    def pose(self) -> Pose:
+        return self.estimator.pose
+
+    # ------------------------------------------------------------------ dead reckoning
+    def observe(self, obs: Observation) -> Pose:
+        """Fold in the IMU and encoder samples of ``obs``; returns the onboard pose."""
+        obs = require_observation(obs, "Onboard.observe")
+        self._imu_pending.extend(obs.imu)
+        if obs.encoders:  # 8 Hz pose update: the IMU samples since the last encoder reading plus the new reading
+            self.dead_reckoning.update(self._imu_pending, obs.encoders[-1])
+            self.estimator.update(self._imu_pending, obs.encoders[-1])
+            self._imu_pending = []
+        return self.estimator.pose
+
+    # ------------------------------------------------------------------ visual odometry
+    def vo_step(self, obs: Observation, camera: str) -> VoStep:
+        """Run VO on ``obs``'s ``camera`` pair and apply an accepted motion to the onboard pose."""
+        obs = require_observation(obs, "Onboard.vo_step")
+        if self.vo is None:
+            raise RuntimeError("VO is off in this configuration ([nav.vo] enabled = false)")
+        pair = obs.pair(camera)
+        est = self.estimator
+        pred = est.predicted_motion_rover()
+        commanded = est.distance_m - self._last_frame_distance_m
+        prev_R = est.vo_frame_pose.R_world_rover
+        t0 = time.perf_counter()
+        res = self.vo.step(pair.left_u8, pair.right_u8, pair.rig, pred, R_world_rover=prev_R)
+        ms = (time.perf_counter() - t0) * 1e3
+        ok = res.status == "ok"
+        slip = 1.0 - float(res.motion_rover[0, 3]) / commanded if ok and abs(commanded) > 1e-3 else math.nan
+        if ok:
+            est.apply_vo_correction(res.motion_rover)
+        else:
+            est.mark_vo_frame()
+        self._last_frame_distance_m = est.distance_m
+        return VoStep(res, commanded, slip, ms, pred, prev_R)
+
+    def reset_vo(self) -> None:
+        """Forget the previous pair (the cameras were repointed)."""
+        if self.vo is not None:
+            self.vo.reset()
+
+    # ------------------------------------------------------------------ stereo and planning
+    def range_image(self, obs: Observation, camera: str) -> RangeImage:
+        pair = require_observation(obs, "Onboard.range_image").pair(camera)
+        return range_image_with(self.stereo, pair.left_u8, pair.right_u8, pair.rig)
+
+    def start_planning(self) -> None:
+        """A fresh planner (empty goodness map) for a new autonav command."""
+        self.planner = self.planner_factory()
+
+    def plan(self, obs: Observation, goal_xy: np.ndarray, cameras: Sequence[str]) -> PlanCycle:
+        """One GESTALT cycle on the pairs of ``cameras`` (the first is the forward-looking one)."""
+        obs = require_observation(obs, "Onboard.plan")
+        if self.planner is None:
+            self.start_planning()
+        pose = self.estimator.pose
+        t0 = time.perf_counter()
+        ri = self.range_image(obs, cameras[0])
+        pts = terrain_points(ri.points_rover_m())
+        for cam in cameras[1:]:
+            pts = np.vstack([pts, terrain_points(self.range_image(obs, cam).points_rover_m())])
+        T = pose.as_matrix()
+        pts_world = transform_points(T, pts)
+        yaw = heading_rad(T[:3, :3])
+        decision = self.planner.step(pts_world, np.array([T[0, 3], T[1, 3], yaw]), goal_xy)  # type: ignore[union-attr]
+        return PlanCycle(decision, ri, pts_world, T, (time.perf_counter() - t0) * 1e3)
+
+    def keep_out_violation(self, zones: Sequence[tuple[str, float, float, float]]) -> tuple[str, float] | None:
+        """The first zone (name, x, y, radius) the onboard pose is inside, with its distance; None if clear."""
+        p = self.estimator.pose.position_xyz_m
+        for name, x, y, r in zones:
+            d = math.hypot(p[0] - x, p[1] - y)
+            if d < r:
+                return name, d
+        return None
