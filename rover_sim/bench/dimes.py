@@ -1,7 +1,7 @@
 """`rover-sim bench dimes`: DIMES horizontal-velocity error over a Monte-Carlo of seeded descents.
 
-Protocol: ``runs`` descents (:mod:`~rover_sim.mission.descent`), run ``k`` with conditions seed ``k`` (wind speed uniform in
-0-20 m/s from a uniform direction, wind shear, parachute swing, spin, IMU and radar errors, sun) over terrain
+Protocol: ``runs`` descents (:mod:`~rover_sim.mission.descent`), run ``k`` with conditions seed ``k`` (wind speed
+uniform in 0-20 m/s from a uniform direction, wind shear, parachute swing, spin, IMU and radar errors, sun) over terrain
 seed ``k % terrains`` (``terrains`` cratered plains, default one per five descents: synthesising and texturing a
 3.2 km plain takes about 10 s, rendering a descent about 0.5 s; each descent sees its own part of its plain from its
 own heading). Each descent's three images go through :func:`nav.dimes.estimate_velocity`; the error is the
