@@ -31,20 +31,13 @@ re-sent only when they change; a trajectory is decimated to ``min_spacing_m`` an
 ``segment_points`` vertices, so each call re-sends only the open block (completed blocks stay visible, latest-at
 semantics), never the whole polyline.
 
-Reading a recording back (rerun 0.41)::
-
-    from rerun.chunk import RrdReader
-    chunks = RrdReader(path).stream().to_chunks()       # works with or without the RRD footer
-    RrdReader(path).store().summary()                   # needs the footer that close() writes
-
-or :func:`entity_row_counts` below.
+Reading a recording back: :mod:`rover_sim.io.rrd` (:func:`entity_row_counts`).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
@@ -52,6 +45,18 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+
+from rover_sim.io.blueprint import default_blueprint
+from rover_sim.io.recording_helpers import (  # noqa: F401 - TERRAIN_MAX_TRIANGLES re-exported from here
+    TERRAIN_MAX_TRIANGLES,
+    PolylineState,
+    colour_of,
+    ramp_red_green,
+    rover_visual,
+    terrain_mesh_step,
+    xyzw,
+)
+from rover_sim.io.rrd import entity_row_counts  # noqa: F401 - re-exported from here
 
 if TYPE_CHECKING:
     from nav.camera import StereoRig
@@ -61,14 +66,11 @@ APPLICATION_ID = "rover-sim"
 TIMELINE_SIM_TIME = "sim_time"
 TIMELINE_STEP = "step"
 
-TERRAIN_MAX_TRIANGLES = 200_000  # finer terrain grids are decimated (Terrain.to_mesh(step=...)) below this
 POINTS_MAX = 50_000  # larger point clouds are subsampled (evenly, deterministic) before logging
 CAMERA_PLANE_DISTANCE_M = 0.25  # how far in front of the camera the viewer draws the image plane / frustum
 LEVELS = ("TRACE", "DEBUG", "INFO", "WARN", "ERROR", "CRITICAL")
 
 _ROCK_RGBA = (120, 104, 92, 255)
-_TRAJECTORY_RGB = {"truth": (245, 245, 245), "dead_reckoning": (255, 150, 0), "vo": (0, 170, 255)}
-_OTHER_RGB = ((200, 80, 255), (80, 220, 120), (255, 80, 120), (255, 230, 60))
 _UNKNOWN_RGBA = (128, 128, 128, 140)
 _VETOED_RGBA = (70, 70, 70, 255)
 _CHOSEN_RGBA = (0, 255, 255, 255)
@@ -76,15 +78,6 @@ _KEEP_OUT_RGBA = (255, 40, 40, 255)
 _INLIER_RGBA = (40, 230, 60, 255)
 _OUTLIER_RGBA = (255, 50, 40, 255)
 _DRAPE_OFFSET_M = 0.03  # lines and points drawn on the ground sit this far above it so they are not z-fought
-
-# Approximate MER rover visual in the rover frame (from models/mer/rover.xml: web, solar deck, mast pole, wheels
-# of radius 0.125 m and width 0.16 m; rover origin 0.525 m above flat ground).
-_BODY_CENTERS = [(0.0, 0.0, 0.03), (-0.02, 0.0, 0.175), (-0.25, 0.85, 0.17), (-0.25, -0.85, 0.17), (0.35, 0.2, 0.55)]
-_BODY_HALF_SIZES = [(0.55, 0.35, 0.13), (0.80, 0.55, 0.012), (0.45, 0.30, 0.01), (0.45, 0.30, 0.01), (0.03, 0.03, 0.36)]
-_BODY_RGBA = [(217, 209, 191, 255), (31, 36, 71, 255), (31, 36, 71, 255), (31, 36, 71, 255), (200, 200, 200, 255)]
-_WHEEL_RADIUS_M = 0.125
-_WHEEL_WIDTH_M = 0.16
-_WHEEL_CENTERS = [(x, y, -0.525 + _WHEEL_RADIUS_M) for x in (0.55, 0.0, -0.55) for y in (0.55, -0.55)]
 
 
 # ------------------------------------------------------------------------------------------------- protocol
@@ -245,82 +238,6 @@ class NullRecorder:
         self.close()
 
 
-# ------------------------------------------------------------------------------------------------ blueprint
-
-
-def default_blueprint() -> rrb.Blueprint:
-    """3D world view; navcam/hazcam image views with VO features; time-series tabs for ``plots``; event log."""
-    image_contents = ["+ $origin/image", "+ $origin/features", "+ $origin/tracks"]
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(name="world", origin="world"),
-            rrb.Vertical(
-                rrb.Tabs(
-                    rrb.Spatial2DView(name="navcam left", origin="world/rover/navcam/left", contents=image_contents),
-                    rrb.Spatial2DView(
-                        name="navcam depth", origin="world/rover/navcam/left", contents=["+ $origin/depth"]
-                    ),
-                    rrb.Spatial2DView(
-                        name="hazcam front left", origin="world/rover/hazcam_front/left", contents=image_contents
-                    ),
-                ),
-                rrb.Tabs(
-                    rrb.TimeSeriesView(name="position error", origin="plots/position_error_m"),
-                    rrb.TimeSeriesView(name="slip", origin="plots/slip"),
-                    rrb.TimeSeriesView(name="tilt", origin="plots/tilt_deg"),
-                    rrb.TimeSeriesView(name="VO inliers", origin="plots/vo_inliers"),
-                    rrb.TimeSeriesView(name="all plots", origin="plots"),
-                ),
-                rrb.TextLogView(name="events", origin="events"),
-                row_shares=[3, 2, 1],
-            ),
-            column_shares=[3, 2],
-        ),
-        collapse_panels=True,
-    )
-
-
-# ------------------------------------------------------------------------------------------------- helpers
-
-
-def _ramp_red_green(x: np.ndarray) -> np.ndarray:
-    """``(N, 3)`` uint8 colours: 0 red -> 0.5 yellow -> 1 green (x clipped to [0, 1])."""
-    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)[:, None]
-    red, yellow, green = np.array([215, 40, 30.0]), np.array([235, 200, 40.0]), np.array([40, 185, 60.0])
-    lo = red + (yellow - red) * (2.0 * x)
-    hi = yellow + (green - yellow) * (2.0 * x - 1.0)
-    return np.where(x < 0.5, lo, hi).round().astype(np.uint8)
-
-
-def _xyzw(quat_wxyz: np.ndarray) -> np.ndarray:
-    q = np.asarray(quat_wxyz, dtype=np.float64)
-    return np.array([q[1], q[2], q[3], q[0]])
-
-
-def _colour_of(name: str) -> tuple[int, int, int]:
-    if name in _TRAJECTORY_RGB:
-        return _TRAJECTORY_RGB[name]
-    return _OTHER_RGB[sum(map(ord, name)) % len(_OTHER_RGB)]
-
-
-def terrain_mesh_step(nrow: int, ncol: int, max_triangles: int = TERRAIN_MAX_TRIANGLES) -> int:
-    """Smallest ``Terrain.to_mesh`` step that keeps the mesh under ``max_triangles`` triangles."""
-    step = 1
-    while 2 * math.ceil((nrow - 1) / step) * math.ceil((ncol - 1) / step) > max_triangles:
-        step += 1
-    return step
-
-
-@dataclass
-class _PolylineState:
-    """Incremental bookkeeping of one trajectory (see module docstring)."""
-
-    n_in: int = 0  # input points consumed
-    last_in: np.ndarray | None = None  # the last consumed input point, to detect a rewritten history
-    block: int = 0  # index of the open block
-    kept: list[np.ndarray] = field(default_factory=list)  # vertices of the open block
-
-
 # ------------------------------------------------------------------------------------------------- recorder
 
 
@@ -367,7 +284,7 @@ class RerunRecorder:
         self._rigs: dict[str, StereoRig] = {}
         self._intrinsics: dict[str, tuple[float, ...]] = {}
         self._extrinsics: dict[str, np.ndarray] = {}
-        self._tracks: dict[str, _PolylineState] = {}
+        self._tracks: dict[str, PolylineState] = {}
         self._log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         self._log_rover_visual()
 
@@ -387,25 +304,7 @@ class RerunRecorder:
         self._rec.set_time(TIMELINE_STEP, sequence=self._step)
 
     def _log_rover_visual(self) -> None:
-        q = math.sqrt(0.5)
-        self._log(
-            "world/rover/visual",
-            rr.Boxes3D(
-                centers=_BODY_CENTERS,
-                half_sizes=_BODY_HALF_SIZES,
-                colors=_BODY_RGBA,
-                fill_mode=rr.components.FillMode.Solid,
-            ),
-            rr.Cylinders3D(
-                centers=_WHEEL_CENTERS,
-                lengths=[_WHEEL_WIDTH_M] * 6,
-                radii=[_WHEEL_RADIUS_M] * 6,
-                quaternions=[rr.Quaternion(xyzw=[q, 0.0, 0.0, q])] * 6,  # cylinder axis z -> rover y
-                colors=[(60, 60, 60, 255)] * 6,
-                fill_mode=rr.components.FillMode.Solid,
-            ),
-            static=True,
-        )
+        self._log("world/rover/visual", *rover_visual(), static=True)
 
     # -- static ----------------------------------------------------------------------------------------------
 
@@ -548,7 +447,7 @@ class RerunRecorder:
         self._time(t_s, step)
         self._log(
             "world/rover",
-            rr.Transform3D(translation=np.asarray(position_m, dtype=np.float64), quaternion=_xyzw(quat_wxyz)),
+            rr.Transform3D(translation=np.asarray(position_m, dtype=np.float64), quaternion=xyzw(quat_wxyz)),
         )
 
     def log_points(
@@ -578,8 +477,8 @@ class RerunRecorder:
         if st is None or rewritten:
             if st is not None:  # history was rewritten: start over
                 self._log(f"{base}/path", rr.Clear(recursive=True))
-            st = self._tracks[name] = _PolylineState()
-        rgb = _colour_of(name)
+            st = self._tracks[name] = PolylineState()
+        rgb = colour_of(name)
         changed = False
         min2 = self.min_spacing_m**2
         for q in p[st.n_in :]:
@@ -620,7 +519,7 @@ class RerunRecorder:
         known = np.isfinite(g)
         colors = np.empty((len(g), 4), dtype=np.uint8)
         colors[:] = _UNKNOWN_RGBA
-        colors[known, :3] = _ramp_red_green(g[known])
+        colors[known, :3] = ramp_red_green(g[known])
         colors[known, 3] = 255
         zz = np.where(np.isfinite(zz), zz, 0.0) + _DRAPE_OFFSET_M
         self._log(
@@ -646,7 +545,7 @@ class RerunRecorder:
         colors = np.empty((len(v), 4), dtype=np.uint8)
         colors[:] = _VETOED_RGBA
         if finite.any():
-            colors[finite, :3] = _ramp_red_green(v[finite] / top if top > 0 else np.zeros(finite.sum()))
+            colors[finite, :3] = ramp_red_green(v[finite] / top if top > 0 else np.zeros(finite.sum()))
             colors[finite, 3] = 255
         strips = [np.asarray(s, dtype=np.float32).reshape(-1, 3) for s in polylines]
         self._log("world/arcs/candidates", rr.LineStrips3D(strips, colors=colors, radii=[0.01]))
@@ -693,20 +592,3 @@ class RerunRecorder:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
-
-
-# ------------------------------------------------------------------------------------------------- reading
-
-
-def entity_row_counts(path: str | Path) -> dict[str, int]:
-    """Rows per entity path (static and temporal together) of an ``.rrd``, with or without its footer.
-
-    Entity paths come back with a leading ``/`` (``"/world/rover"``); the recording's ``/__properties`` are
-    included.
-    """
-    from rerun.chunk import RrdReader
-
-    counts: dict[str, int] = {}
-    for chunk in RrdReader(Path(path)).stream().to_chunks():
-        counts[chunk.entity_path] = counts.get(chunk.entity_path, 0) + chunk.num_rows
-    return counts
