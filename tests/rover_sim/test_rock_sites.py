@@ -161,7 +161,8 @@ def test_one_site_panorama_finds_the_rocks_through_the_onboard_pose() -> None:
     with RockSiteSurvey(small_site_scenario(), config) as sv:
         m = sv.mission
         truth = Pose(m.sim.time_s, m.sim.position_m(), m.sim.quat_wxyz())
-        m.onboard = DeadReckoner(m.geom, Pose(truth.t_s, truth.position_xyz_m + shift, truth.quat_wxyz))
+        shifted = Pose(truth.t_s, truth.position_xyz_m + shift, truth.quat_wxyz)
+        m.onboard.estimator = DeadReckoner(m.onboard.geometry, shifted)
         site = sv.survey_site()
         terrain = sv.terrain
     assert site.n_points > 10_000

@@ -1,0 +1,158 @@
+"""The architecture holds: module sizes, no private calls across modules, no import cycle, pure ``nav``,
+and the onboard stack's entry points take only :class:`Observation` (issue #14)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from nav.trajectory import Pose
+from rover_sim.mission.observation import NotAnObservation, Observation
+from rover_sim.mission.onboard import Onboard
+from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
+from rover_sim.mission.scenario import NavSpec
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("rover_sim", "nav", "terrains")
+MAX_LINES = 600
+# private attributes of third-party objects the code legitimately touches (MuJoCo's renderer context, a pool size)
+THIRD_PARTY_PRIVATE = {"_mjr_context", "_processes"}
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            rel = path.relative_to(ROOT).with_suffix("")
+            parts = list(rel.parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = path
+    return out
+
+
+MODULES = _modules()
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_no_module_over_600_lines(name):
+    n = len(MODULES[name].read_text().splitlines())
+    assert n <= MAX_LINES, f"{name} has {n} lines (> {MAX_LINES}): split it along its seams"
+
+
+def test_no_private_calls_across_modules():
+    """No ``other._name`` access (self/cls aside) and no ``from x import _name`` within our packages."""
+    bad = []
+    for name, path in MODULES.items():
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and node.attr.startswith("_") and not node.attr.startswith("__"):
+                base = node.value
+                if isinstance(base, ast.Name) and base.id in ("self", "cls"):
+                    continue
+                if node.attr in THIRD_PARTY_PRIVATE:
+                    continue
+                bad.append(f"{name}:{node.lineno} .{node.attr}")
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in PACKAGES:
+                for alias in node.names:
+                    if alias.name.startswith("_") and not alias.name.startswith("__"):
+                        bad.append(f"{name}:{node.lineno} from {node.module} import {alias.name}")
+    assert not bad, "private names used across modules (add a public hook):\n" + "\n".join(bad)
+
+
+def _imports(path: Path, module: str) -> set[str]:
+    """Modules of our packages that ``module`` imports anywhere (function bodies included, TYPE_CHECKING excluded)."""
+    tree = ast.parse(path.read_text())
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            skip.update(id(n) for n in ast.walk(node))
+    out = set()
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        else:
+            continue
+        for n in names:
+            while n and n not in MODULES:
+                n = n.rpartition(".")[0]
+            if n and n != module and not module.startswith(n + ".") and n not in PACKAGES:
+                out.add(n)
+    return out
+
+
+def test_no_import_cycle():
+    graph = {m: _imports(p, m) for m, p in MODULES.items()}
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m: str) -> None:
+        state[m] = 1
+        stack.append(m)
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == 1:
+                cycle = stack[stack.index(n) :] + [n]
+                raise AssertionError("import cycle: " + " -> ".join(cycle))
+            if n not in state:
+                visit(n)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
+
+
+def test_nav_is_pure():
+    for name, path in MODULES.items():
+        if name.split(".")[0] != "nav":
+            continue
+        for imported in _imports(path, name) | {
+            a.name for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.Import) for a in n.names
+        }:
+            assert not imported.startswith(("rover_sim", "mujoco", "rerun")), f"{name} imports {imported}"
+
+
+def test_onboard_imports_no_simulator_or_truth():
+    allowed_rover_sim = {"rover_sim.mission.observation"}
+    for mod in ("rover_sim.mission.onboard", "rover_sim.mission.observation"):
+        ours = {m for m in _imports(MODULES[mod], mod) if m.startswith("rover_sim")}
+        assert ours <= allowed_rover_sim, f"{mod} imports {ours - allowed_rover_sim}"
+
+
+@pytest.fixture
+def onboard():
+    nav = NavSpec()
+    start = Pose(0.0, np.zeros(3), np.array([1.0, 0, 0, 0]))
+    return Onboard(start, make_vo(nav.vo), make_stereo(nav.stereo), lambda: make_planner(nav.planner))
+
+
+def test_onboard_refuses_anything_but_an_observation(onboard):
+    truthy = SimpleNamespace(t_s=0.0, imu=(), encoders=(), images={}, position_m=np.zeros(3), wheel_slip=np.zeros(6))
+
+    class Smuggler(Observation):
+        pass
+
+    smuggled = Smuggler(t_s=0.0)
+    object.__setattr__(smuggled, "truth_position_m", np.zeros(3))
+    for bad in (truthy, smuggled, {"t_s": 0.0}):
+        with pytest.raises(NotAnObservation, match="accepts only"):
+            onboard.observe(bad)
+        with pytest.raises(NotAnObservation):
+            onboard.vo_step(bad, "navcam")
+        with pytest.raises(NotAnObservation):
+            onboard.plan(bad, np.zeros(2), ("hazcam_front",))
+    onboard.observe(Observation(t_s=0.0))  # the real thing is accepted
+
+
+def test_observation_holds_no_truth_fields():
+    names = set(Observation.__dataclass_fields__)
+    assert names == {"t_s", "imu", "encoders", "images", "mast_pan_deg", "mast_elevation_deg", "start_pose"}
