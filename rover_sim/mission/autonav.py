@@ -90,6 +90,7 @@ def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
         cameras = (HAZCAM, REAR_HAZCAM) if backing else (HAZCAM,)
         frames = {c: mission.world.render(c) for c in cameras}
         obs = mission.world.observation_with([], [], frames)
+        mission.notify_images(obs)
         cycle = onboard.plan(obs, goal, cameras)
         decision = cycle.decision
         stats.cycle_ms.append(cycle.ms)

@@ -27,6 +27,7 @@ from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission import acceptance
 from rover_sim.mission.acceptance import TALL_ROCK_M
 from rover_sim.mission.evaluator import Evaluator, Metrics, VoStepRecord
+from rover_sim.mission.observation import Observation
 from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
 from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
 from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, TurnCmd
@@ -78,7 +79,10 @@ class Mission:
         self.error: str | None = None
         self.step = 0
         self.autonav_stats = None  # set by rover_sim.mission.autonav when the scenario uses autonav
-        self.vo_listeners: list[Callable[[VoStep, np.ndarray], None]] = []
+        # public hooks (sinks): exporters, surveys and user code subscribe; none may change the run
+        self.vo_listeners: list[Callable[[VoStep, np.ndarray], None]] = []  # (step, T_rover_cam of the pair)
+        self.tick_listeners: list[Callable[[Observation, Pose], None]] = []  # (sensor data, truth) at 8 Hz
+        self.image_listeners: list[Callable[[Observation, Pose], None]] = []  # every stereo pair the rover takes
         self.extra_timing: dict = {}
         self._wall_s = 0.0
 
@@ -207,8 +211,11 @@ class Mission:
     def tick(self, sim: RoverSim | None = None) -> str | None:
         """Sensors -> onboard dead reckoning -> evaluator -> keep-out check -> recording (8 Hz)."""
         sim = self.sim
-        self.onboard.observe(self.world.observation())
+        obs = self.world.observation()
+        self.onboard.observe(obs)
         truth = self.record_poses()
+        for listener in self.tick_listeners:
+            listener(obs, truth)
         tall = sim.rock_contacts(TALL_ROCK_M)
         self.evaluator.count_contacts(bool(sim.body_contacts()), bool(tall))
         if tall and self.evaluator.tall_rock_contact_ticks == 1:
@@ -256,6 +263,7 @@ class Mission:
         camera = self.sc.nav.camera
         frame = self.world.render(camera)
         obs = self.world.observation_with([], [], {camera: frame})
+        self.notify_images(obs)
         out = self.onboard.vo_step(obs, camera)
         res = out.result
         record = self.evaluator.vo_step(
@@ -282,6 +290,13 @@ class Mission:
             if out.vo_slip > limit:
                 raise Halt("slip_limit", f"VO measured {100 * out.vo_slip:.0f} % slip (limit {100 * limit:.0f} %)")
         return out
+
+    def notify_images(self, obs: Observation) -> None:
+        """Hand a freshly imaged observation (and the truth at that instant) to the image listeners."""
+        if self.image_listeners:
+            truth = self.world.truth_pose()
+            for listener in self.image_listeners:
+                listener(obs, truth)
 
     # ------------------------------------------------------------------ logging
     def event(self, text: str, level: str = "INFO") -> None:
