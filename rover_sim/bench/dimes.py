@@ -25,9 +25,10 @@ import numpy as np
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from nav.dimes import DimesParams, DimesResult, estimate_velocity
 from rover_sim.bench import write_json
+from rover_sim.mission import acceptance
 from rover_sim.mission.descent import FEATURELESS_TERRAIN, DescentConditions, DescentRun, DescentWorld
 
-ACCEPT_1SIGMA_MPS = 1.5
+ACCEPT_1SIGMA_MPS = acceptance.DIMES.max_velocity_error_1sigma_m_s  # bars: rover_sim.mission.acceptance
 MAX_WIND_MPS = 20.0
 WIND_BINS_MPS = (0.0, 5.0, 10.0, 15.0, 20.0)
 FEATURELESS_SEED_OFFSET = 10_000  # conditions seeds of the featureless descents
@@ -173,7 +174,12 @@ def bench_dimes(
         "runs": runs,
         "velocity_error_1sigma_mps": sigma,
         "featureless_rejected": featureless_rejected,
-        "passed": bool(sigma is not None and sigma <= ACCEPT_1SIGMA_MPS and featureless_rejected and runs >= 50),
+        "passed": bool(
+            sigma is not None
+            and sigma <= ACCEPT_1SIGMA_MPS
+            and featureless_rejected
+            and runs >= acceptance.DIMES.min_runs
+        ),
         "accepted_fraction": total["accepted"] / max(runs, 1),
         "velocity_error_rms_per_axis_mps": total["rms_axis"],
         "velocity_error_mean_mps": total["mean"],

@@ -24,6 +24,7 @@ terrain's rock list and the simulator's true poses:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
@@ -31,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from nav.rocks import ROCK_SHAPES
+from rover_sim.mission import acceptance
 from rover_sim.mission.scenario import load_scenario
 from rover_sim.mission.survey import (
     ExtractionEval,
@@ -45,14 +47,7 @@ from rover_sim.mission.survey import (
 
 SCENARIO = "rock_localization"
 MAX_MATCH_SEPARATION_M = 26.0
-ACCEPT = {
-    "recall": 0.90,
-    "precision": 0.90,
-    "median_rms_m": 0.04,
-    "match_correct_frac": 0.90,
-    "site_error_pct": 2.0,
-    "model_type_match_frac_well_observed": 0.80,
-}
+ACCEPT = dataclasses.asdict(acceptance.ROCKS)  # the bars live in rover_sim.mission.acceptance
 
 
 def bench_rocks(

@@ -18,10 +18,11 @@ import time
 from pathlib import Path
 
 from rover_sim.bench import write_json
+from rover_sim.mission import acceptance
 from rover_sim.mission.sweep import SweepResult, default_workers, run_sweep
 
 GRID = ("terrain.slope.slope_deg=0,5,10,15", "terrain.material.kind=sand,bedrock")
-ACCEPT_RATIO = 0.65
+ACCEPT_RATIO = acceptance.SWEEP.max_parallel_ratio  # bars: rover_sim.mission.acceptance
 DRIVE_M = 10.0  # per job: a few seconds on one idle core (setup ~0.7 s, 200 s of physics, outputs)
 
 SCENARIO_TOML = """

@@ -54,19 +54,29 @@ def bench_slip(json: JsonOpt = None, seed: int = 0) -> None:
 def bench_render_cmd(json: JsonOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
     from rover_sim.bench.render import bench_render
+    from rover_sim.mission import acceptance
 
     result = bench_render(str(json) if json else None)
-    if result["stereo_pair_256_shadows_ms"] > 40.0:
+    if result["stereo_pair_256_shadows_ms"] > acceptance.RENDER.max_pair_256_shadows_ms:
         raise typer.Exit(code=1)
 
 
 @bench_app.command("stereo")
-def bench_stereo_cmd(json: JsonOpt = None) -> None:
-    """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px)."""
+def bench_stereo_cmd(
+    json: JsonOpt = None,
+    stereo: Annotated[
+        list[str] | None, typer.Option("--stereo", help=f"Also run this stereo matcher ({_IMPL}); repeatable.")
+    ] = None,
+) -> None:
+    """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px);
+    any --stereo plugin on the same pairs."""
     from rover_sim.bench.stereo import bench_stereo
 
-    r = bench_stereo(str(json) if json else None)
-    if r["ratio"] > 1.5 or r["ours_bad1"] >= r["stereobm_bad1"]:
+    try:
+        r = bench_stereo(str(json) if json else None, plugins=stereo or None)
+    except RoverSimError as e:
+        _fail(e)
+    if not r["passed"]:
         raise typer.Exit(code=1)
 
 
