@@ -8,11 +8,13 @@ from typing import Annotated
 import typer
 
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported anywhere)
+from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
 
 app = typer.Typer(help="MER-class rover simulator with a MER-style navigation stack.", no_args_is_help=True)
 bench_app = typer.Typer(help="Benchmarks: print a markdown table, optionally write JSON.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
+app.command("view")(view_cmd)
 
 JsonOpt = Annotated[Path | None, typer.Option("--json", help="Write the results as JSON to this path.")]
 _IMPL = "an import path 'pkg.module:Class' or an entry point in 'rover_sim.plugins'"

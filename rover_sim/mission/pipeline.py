@@ -274,7 +274,11 @@ class Mission:
             self.rec.log_scalars(
                 t,
                 self.step,
-                {"slip/true": record.true_slip, "slip/vo": record.vo_slip, "vo_inliers": float(res.n_inliers)},
+                {
+                    "slip_pct/true": 100.0 * record.true_slip,
+                    "slip_pct/vo": 100.0 * record.vo_slip,
+                    "vo_inliers": float(res.n_inliers),
+                },
             )
             if res.status != "ok":
                 self.event(f"VO {res.status}: {res.reason}", "WARN")

@@ -9,10 +9,19 @@ from pathlib import Path
 import numpy as np
 
 from nav.trajectory import write_tum
+from rover_sim.io.blueprint import RunLayout, blueprint_for
 from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission.evaluator import Metrics
 from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.scenario import Scenario
+from rover_sim.mission.scenario import AutonavCmd, Scenario
+
+
+def layout_of(sc: Scenario) -> RunLayout:
+    """What the recording of ``sc`` will hold, for its viewer layout."""
+    return RunLayout(
+        vo_camera=sc.nav.camera if sc.nav.vo.enabled else None,
+        autonav=any(isinstance(c, AutonavCmd) for c in sc.commands),
+    )
 
 
 def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
@@ -76,7 +85,9 @@ def run_scenario(
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
     rec: Recorder = (
-        RerunRecorder(out_dir / "recording.rrd", recording_name=sc.name) if (record and out_dir) else NullRecorder()
+        RerunRecorder(out_dir / "recording.rrd", recording_name=sc.name, blueprint=blueprint_for(layout_of(sc)))
+        if (record and out_dir)
+        else NullRecorder()
     )
     bar = None
     if progress:
