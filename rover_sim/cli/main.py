@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported anywhere)
+from rover_sim.cli.export import export_cmd
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
 
@@ -350,6 +351,9 @@ def stereo_command(
         stereo_cmd(left, right, num_disparities, out, window_px)
     except RoverSimError as e:
         _fail(e)
+
+
+app.command("export")(export_cmd)
 
 
 def main() -> None:  # pragma: no cover - console entry point
