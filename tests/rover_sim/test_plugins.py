@@ -119,3 +119,25 @@ def test_bad_parameter_names_the_field_and_the_range():
         load_scenario("wopmay", ["nav.vo.window_px=4"])
     with pytest.raises(ConfigError, match="nav.vo.params.bogus"):
         load_scenario("wopmay", ["nav.vo.bogus=1"])
+
+
+def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsys):
+    """`rover-sim bench vo --vo examples.opencv_vo:OpenCvStereoVO` on one case: both rows, plugin JSON keys."""
+    import json
+    from pathlib import Path
+
+    from rover_sim.bench.missions import bench_vo
+
+    monkeypatch.chdir(Path(__file__).resolve().parents[2])  # the example lives in the repository's examples/
+    out = tmp_path / "vo.json"
+    plugin = "examples.opencv_vo:OpenCvStereoVO"
+    results = bench_vo(str(out), out_root=tmp_path, plugins=[plugin], cases=["msstb"])
+    table = capsys.readouterr().out
+    assert "| MER VO (builtin) | msstb |" in table and f"| {plugin} | msstb |" in table
+    saved = json.loads(out.read_text())
+    assert set(saved["plugins"][plugin]["msstb"]) == set(saved["msstb"])
+    mer, ours = results["msstb"], results["plugins"][plugin]["msstb"]
+    assert mer["passed"] and mer["vo_convergence_pct"] == 100.0
+    # the example VO really ran in the loop (its steps were judged), and did better than dead reckoning
+    assert ours["vo_convergence_pct"] is not None and ours["vo_convergence_pct"] > 50.0
+    assert ours["vo_error_pct"] < ours["dr_error_pct"]
