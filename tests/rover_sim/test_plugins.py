@@ -141,3 +141,15 @@ def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsy
     # the example VO really ran in the loop (its steps were judged), and did better than dead reckoning
     assert ours["vo_convergence_pct"] is not None and ours["vo_convergence_pct"] > 50.0
     assert ours["vo_error_pct"] < ours["dr_error_pct"]
+
+
+def test_installed_packages_register_plugins_by_entry_point(user_module, monkeypatch):
+    from importlib.metadata import EntryPoint
+
+    from rover_sim.mission import plugins
+
+    ep = EntryPoint(name="refusing_vo", value=f"{user_module}:RefusingVO", group=plugins.ENTRY_POINT_GROUP)
+    monkeypatch.setattr(plugins, "entry_points", lambda group: [ep] if group == plugins.ENTRY_POINT_GROUP else [])
+    spec = load_scenario("wopmay").nav.vo.model_copy(update={"impl": "refusing_vo"})
+    vo = make_vo(spec)
+    assert type(vo.impl).__name__ == "RefusingVO"
