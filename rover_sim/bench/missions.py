@@ -94,10 +94,12 @@ def bench_suite(
     fast: bool = False,
     out_root: Path = Path("runs/bench_suite"),
     update_baseline: bool = False,
+    baseline_path: Path | None = None,
 ) -> tuple[list[dict], bool]:
-    """Run the catalogue (``fast``: the CI subset); markdown table; (rows, ok)."""
+    """Run the catalogue (``fast``: the CI subset); markdown table; (rows, ok). ``baseline_path``: default BASELINE."""
     names = [n for n in catalogue() if not fast or load_scenario(n).fast]
-    baseline = json.loads(BASELINE.read_text()) if BASELINE.is_file() else {}
+    baseline_path = Path(baseline_path) if baseline_path is not None else BASELINE
+    baseline = json.loads(baseline_path.read_text()) if baseline_path.is_file() else {}
     rows, ok = [], True
     for name in names:
         m = run_scenario(name, out_root / name, record=False)
@@ -118,6 +120,6 @@ def bench_suite(
     if update_baseline:
         keep = ("vo_error_pct", "vo_convergence_pct", "false_positives", "dr_error_pct", "max_slip_pct")
         merged = baseline | {r["scenario"]: {k: r[k] for k in keep} for r in rows}
-        BASELINE.parent.mkdir(parents=True, exist_ok=True)
-        BASELINE.write_text(json.dumps(merged, indent=2, sort_keys=True) + "\n")
+        baseline_path.parent.mkdir(parents=True, exist_ok=True)
+        baseline_path.write_text(json.dumps(merged, indent=2, sort_keys=True) + "\n")
     return rows, ok

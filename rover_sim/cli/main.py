@@ -161,11 +161,22 @@ def bench_suite_cmd(
     update_baseline: Annotated[
         bool, typer.Option("--update-baseline", help="Store these results as baseline.")
     ] = False,
+    baseline: Annotated[
+        Path | None,
+        typer.Option(
+            "--baseline",
+            help="Baseline JSON to compare with (and to update). Default: benchmarks/suite_baseline.json in a "
+            "source checkout, the packaged copy otherwise.",
+        ),
+    ] = None,
 ) -> None:
     """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline."""
     from rover_sim.bench.missions import bench_suite
+    from rover_sim.resources import source_checkout
 
-    _, ok = bench_suite(str(json) if json else None, fast=fast, update_baseline=update_baseline)
+    if update_baseline and baseline is None and source_checkout() is None:
+        _fail(ValueError("--update-baseline outside a source checkout needs --baseline PATH (the file to write)"))
+    _, ok = bench_suite(str(json) if json else None, fast=fast, update_baseline=update_baseline, baseline_path=baseline)
     if not ok:
         raise typer.Exit(code=1)
 
@@ -199,6 +210,31 @@ def run_cmd(
     typer.echo(f"{where}; open the recording with: rerun {out}/recording.rrd" if record else where)
     if not metrics.passed:
         raise typer.Exit(code=1)
+
+
+@app.command("scenarios")
+def scenarios_cmd() -> None:
+    """List the scenario catalogue: name, `fast` (in the CI subset) and the first line of the description."""
+    from rover_sim.mission.scenario import catalogue, load_scenario
+
+    names = catalogue()
+    if not names:
+        from rover_sim.resources import scenarios_dir
+
+        _fail(FileNotFoundError(f"no scenario files (*.toml) in {scenarios_dir()}"))
+    width = max((len(n) for n in names), default=0)
+    bad = False
+    for name in names:
+        try:
+            s = load_scenario(name)
+        except RoverSimError as e:
+            typer.echo(f"{name:<{width}}  ?     invalid: {e}")
+            bad = True
+            continue
+        first = next(iter(s.description.strip().splitlines()), "")
+        typer.echo(f"{name:<{width}}  {'fast' if s.fast else '-   '}  {first}")
+    if bad:
+        raise typer.Exit(code=2)
 
 
 @app.command("demo")
