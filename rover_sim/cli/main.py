@@ -248,6 +248,10 @@ def bench_suite_cmd(
     print (the plugin stack is judged by each scenario's criteria; the baseline gates the built-in stack).
     --baseline FILE compares every stack with your own file instead (a metric may get --tolerance worse, relative;
     FILE: a bench suite --json, or what --update-baseline writes there)."""
+    from rover_sim.resources import source_checkout
+
+    if update_baseline and baseline is None and source_checkout() is None:
+        _fail(ValueError("--update-baseline outside a source checkout needs --baseline PATH (the file to write)"))
     path = str(json) if json else None
     with guarded():
         from rover_sim.bench.junit_cases import suite_cases
@@ -317,6 +321,31 @@ def run_cmd(
     where = f"outputs in {out}/ (plots in {out}/plots/)"
     typer.echo(f"{where}; open the recording with: rerun {out}/recording.rrd" if record else where)
     finish(junit, "run", [scenario_case(metrics.deterministic_dict(), "run")])  # status: see rover_sim.cli.status
+
+
+@app.command("scenarios")
+def scenarios_cmd() -> None:
+    """List the scenario catalogue: name, `fast` (in the CI subset) and the first line of the description."""
+    from rover_sim.mission.scenario import catalogue, load_scenario
+
+    names = catalogue()
+    if not names:
+        from rover_sim.resources import scenarios_dir
+
+        _fail(FileNotFoundError(f"no scenario files (*.toml) in {scenarios_dir()}"))
+    width = max((len(n) for n in names), default=0)
+    bad = False
+    for name in names:
+        try:
+            s = load_scenario(name)
+        except RoverSimError as e:
+            typer.echo(f"{name:<{width}}  ?     invalid: {e}")
+            bad = True
+            continue
+        first = next(iter(s.description.strip().splitlines()), "")
+        typer.echo(f"{name:<{width}}  {'fast' if s.fast else '-   '}  {first}")
+    if bad:
+        raise typer.Exit(code=2)
 
 
 @app.command("demo")
