@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import rerun.blueprint as rrb
 
 IMAGE_CONTENTS = ["+ $origin/image", "+ $origin/features", "+ $origin/tracks"]
-TOP_DOWN_HEIGHT_M = 25.0  # eye height of the top-down goodness view above the rover
+TOP_DOWN_HEIGHT_M = 12.0  # eye height of the top-down goodness view above the rover (the 10 m goodness window fills it)
 
 
 @dataclass(frozen=True)
