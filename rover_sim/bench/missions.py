@@ -15,7 +15,7 @@ from rover_sim import interrupts
 from rover_sim.bench import write_json
 from rover_sim.mission import acceptance
 from rover_sim.mission.run import Metrics, run_scenario
-from rover_sim.mission.scenario import catalogue, load_scenario, plugin_overrides
+from rover_sim.mission.scenario import Scenario, catalogue, load_scenario, plugin_overrides, scenario_from_dict
 from rover_sim.resources import suite_baseline_path
 
 BASELINE = suite_baseline_path()
@@ -39,8 +39,14 @@ def _fmt(v) -> str:
     return f"{v:.2f}" if isinstance(v, float) else str(v)
 
 
-def _vo_case(scenario: str, out_dir: Path, overrides: list[str]) -> dict:
-    m = run_scenario(scenario, out_dir, record=False, overrides=overrides)
+def _as_scenario(scenario: str | Scenario, overrides: list[str] | None = None) -> Scenario:
+    if isinstance(scenario, Scenario):
+        return scenario_from_dict(scenario.resolved_dict(), f"<{scenario.name}>", overrides) if overrides else scenario
+    return load_scenario(scenario, overrides)
+
+
+def _vo_case(scenario: str | Scenario, out_dir: Path, overrides: list[str]) -> dict:
+    m = run_scenario(_as_scenario(scenario, overrides), out_dir, record=False)
     return {
         "distance_m": m.distance_m,
         "dr_error_pct": m.dr_error_pct,
@@ -67,10 +73,13 @@ def bench_vo(
     out_root: Path = Path("runs/bench_vo"),
     plugins: list[str] | None = None,
     cases: list[str] | None = None,
+    case_scenarios: dict[str, str | Scenario] | None = None,
 ) -> dict:
     """The issue's VO cases with MER VO, then with each plugin VO (``plugins``: import paths or entry-point names);
-    prints one table with the acceptance (each scenario's own ``[pass]``) beside the measurements."""
-    chosen = {c: s for c, s in VO_CASES.items() if cases is None or c in cases}
+    prints one table with the acceptance (each scenario's own ``[pass]``) beside the measurements.
+    ``case_scenarios`` replaces the case list (case name -> scenario name or TOML path), e.g. for a quick check."""
+    all_cases = case_scenarios if case_scenarios is not None else VO_CASES
+    chosen = {c: s for c, s in all_cases.items() if cases is None or c in cases}
     jobs = [("MER VO (builtin)", None, case) for case in chosen]
     jobs += [(plugin, plugin, case) for plugin in plugins or [] for case in chosen]
     results: dict = {}
@@ -98,7 +107,7 @@ def bench_vo(
         for case, r in per.items():
             if case == "plugins":
                 continue
-            accept = acceptance.describe(load_scenario(chosen[case]).passing)
+            accept = acceptance.describe(_as_scenario(chosen[case]).passing)
             print(
                 f"| {vo_name} | {case} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | "
                 f"{_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | "
