@@ -84,6 +84,9 @@ class VoParams:
     # motion forces a re-initialisation.
     reinit_max_translation_m: float = 0.75
     reinit_max_rotation_deg: float = 18.0
+    # A camera repointed between two pairs by at most this (mast pan/tilt) is tracked across, as the features are
+    # kept in the rover frame; 15 deg of a 45 deg navcam keeps >= 60 % overlap. Larger -> re-initialise.
+    max_repoint_deg: float = 15.0
 
     # --- guards against false positives (paper section 4.3: Sols 137/141 clustering, Sol 235 shadow) ---
     spread_grid_cells: int = 4  # inliers are binned into a spread_grid_cells x spread_grid_cells grid ...
