@@ -53,37 +53,36 @@ class RoverShape:
         return np.concatenate([self.boxes, head]), np.concatenate([self.half_m, self.head_half_m])
 
 
-def _pixel_rays_rover(cam: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
-    """Camera centre (3,) and unit viewing rays (H*W, 3) of every pixel centre, in the rover frame."""
-    u, v = np.meshgrid(np.arange(cam.width_px, dtype=float), np.arange(cam.height_px, dtype=float))
-    d_cam = np.stack([(u - cam.cx_px) / cam.fx_px, (v - cam.cy_px) / cam.fy_px, np.ones_like(u)], -1).reshape(-1, 3)
-    R, t = cam.T_rover_cam[:3, :3], cam.T_rover_cam[:3, 3]
-    d = d_cam @ R.T
-    return t, d / np.linalg.norm(d, axis=1, keepdims=True)
-
-
-def _ray_hits_boxes(origin: np.ndarray, direction: np.ndarray, boxes: np.ndarray, half: np.ndarray) -> np.ndarray:
-    """Per ray (origins (M, 3) or (3,), directions (M, 3)): the nearest positive distance to any box, inf if none."""
-    best = np.full(len(direction), np.inf)
-    for T, h in zip(boxes, half, strict=True):
-        R, c = T[:3, :3], T[:3, 3]
-        o = (origin - c) @ R  # into the box frame
-        d = direction @ R
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1, t2 = (-h - o) / d, (h - o) / d
-        lo = np.nanmax(np.minimum(t1, t2), axis=-1)
-        hi = np.nanmin(np.maximum(t1, t2), axis=-1)
-        hit = (hi >= np.maximum(lo, 0.0)) & np.isfinite(hi)
-        best = np.where(hit, np.minimum(best, np.maximum(lo, 0.0)), best)
-    return best
-
-
 @dataclass(frozen=True)
 class ShadowPrediction:
     """Per pixel (H, W) bool: the rover's shadow on the ground, and the rover itself in view."""
 
     shadow: np.ndarray
     hardware: np.ndarray
+
+
+def _box_corners(boxes: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """(N, 8, 3) corners of the oriented boxes."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    local = signs[None] * half[:, None, :]
+    return np.einsum("nij,nkj->nki", boxes[:, :3, :3], local) + boxes[:, None, :3, 3]
+
+
+def _fill_polygons(polys_rover: list[np.ndarray], cam: PinholeCamera, out: np.ndarray) -> None:
+    """Fill the convex hulls of the projections of rover-frame point sets (each wholly in front of the camera)."""
+    T = np.linalg.inv(cam.T_rover_cam)
+    for P in polys_rover:
+        Pc = P @ T[:3, :3].T + T[:3, 3]
+        if np.any(Pc[:, 2] < NEAR_M):  # a vertex behind the camera: clip by sampling the segment ends in front
+            continue
+        uv = cam.project(Pc)
+        hull = cv2.convexHull(np.round(uv * SUBPIXEL).astype(np.int32))
+        cv2.fillConvexPoly(out, hull, 1, lineType=cv2.LINE_8, shift=SUBPIXEL_BITS)
+
+
+NEAR_M = 0.02
+SUBPIXEL_BITS = 4
+SUBPIXEL = 1 << SUBPIXEL_BITS
 
 
 def predict_shadow(
@@ -95,6 +94,9 @@ def predict_shadow(
 ) -> ShadowPrediction:
     """Predict the rover's shadow in ``cam``'s image (see the module docstring).
 
+    Each box's shadow on the ground plane is the convex hull of its eight corners cast along the sunlight; it and
+    the box itself are projected into the image and filled (a convex ground polygon stays convex through a
+    pinhole camera). Shadow polygons crossing behind the camera are skipped (the downward navcam never needs them).
     ``sun_direction_world``: the direction sunlight travels (from the sun toward the ground), unit, world frame;
     ``R_world_rover``: the onboard attitude; ``T_rover_navcam``: the calibrated navcam-left pose that places the
     mast head's boxes (None: the head is left out).
@@ -102,20 +104,18 @@ def predict_shadow(
     boxes, half = shape.posed(T_rover_navcam)
     s = np.asarray(R_world_rover, dtype=float).T @ np.asarray(sun_direction_world, dtype=float)
     s = s / np.linalg.norm(s)
-    c, d = _pixel_rays_rover(cam)
     hw = (cam.height_px, cam.width_px)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t_ground = (shape.ground_z_m - c[2]) / d[:, 2]
-    on_ground = np.isfinite(t_ground) & (t_ground > 0)
-    t_box = _ray_hits_boxes(c, d, boxes, half)
-    hardware = t_box < np.where(on_ground, t_ground, np.inf)
-    shadow = np.zeros(len(d), bool)
-    sel = np.flatnonzero(on_ground & ~hardware)
-    if len(sel) and s[2] < 0:  # sun above the horizon
-        g = c + d[sel] * t_ground[sel, None]
-        toward_sun = np.broadcast_to(-s, g.shape)
-        shadow[sel] = np.isfinite(_ray_hits_boxes(g + 1e-4 * toward_sun, toward_sun, boxes, half))
-    return ShadowPrediction(shadow.reshape(hw), hardware.reshape(hw))
+    shadow, hardware = np.zeros(hw, np.uint8), np.zeros(hw, np.uint8)
+    if len(boxes) == 0:
+        return ShadowPrediction(shadow.astype(bool), hardware.astype(bool))
+    corners = _box_corners(boxes, half)
+    _fill_polygons(list(corners), cam, hardware)
+    if s[2] < -1e-3:  # sun above the horizon
+        t = (shape.ground_z_m - corners[..., 2]) / s[2]
+        cast = corners + np.maximum(t, 0.0)[..., None] * s
+        _fill_polygons(list(cast), cam, shadow)
+    hardware_b = hardware.astype(bool)
+    return ShadowPrediction(shadow.astype(bool) & ~hardware_b, hardware_b)
 
 
 def vo_feature_mask(prediction: ShadowPrediction, margin_px: int = FEATURE_MARGIN_PX) -> np.ndarray:
