@@ -63,8 +63,16 @@ class VisualOdometer(Protocol):
     - ``tracks``/``inliers`` (optional): feature tracks for the recording; ``None`` is fine.
 
     ``predicted_motion_rover`` is the dead-reckoned motion since the previous pair (same convention as
-    ``motion_rover``); ``R_world_rover`` the IMU attitude at the previous pair. ``reset`` forgets the previous pair
-    (called when the cameras are repointed).
+    ``motion_rover``); ``R_world_rover`` the IMU attitude at the previous pair. ``reset`` forgets the previous pair.
+
+    Optional keyword ``feature_mask``: if ``step`` declares a ``feature_mask`` parameter (or ``**kwargs``), the
+    simulator passes a bool (H, W) image, False where no feature should be picked: in and near the rover's own
+    predicted shadow and on the rover's hardware (:mod:`nav.vo.shadow`; issue #17). A ``step`` without it is
+    called exactly as above and never sees the mask.
+
+    The camera model may change between two pairs (texture-seeking mast pointing): ``rig`` is always the current
+    pair's calibrated model, and an implementation must keep the previous pair's features in a frame that does
+    not depend on it (the rover frame, as the built-in does).
     """
 
     def reset(self) -> None: ...

@@ -232,7 +232,9 @@ class RoverEnv(gymnasium.Env):
         side = 2.0 * max(terrain.half_x_m, terrain.half_y_m)
         px_per_m = min(sc.appearance.texture_px_per_m, MAX_TEXTURE_SIDE_PX / side)
         ap = sc.appearance
-        texture = terrain_texture(terrain, px_per_m, world_seed, fine_soil=ap.fine_soil, contrast=ap.contrast)
+        texture = terrain_texture(
+            terrain, px_per_m, world_seed, fine_soil=ap.fine_soil, contrast=ap.contrast, patches=ap.patch_tuples()
+        )
         self._sim = RoverSim(
             terrain,
             Sun(sc.sun.azimuth_deg, sc.sun.elevation_deg, self.shadows),

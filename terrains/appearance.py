@@ -34,6 +34,7 @@ SAND_SPECKLE = 0.06
 SAND_MOTTLE = 0.035
 FINE_SOIL_FACTOR = 0.06  # fine_soil multiplies the sand detail by this (Meridiani-like, starves stereo)
 SAND_MOTTLE_SCALE_M = 0.4
+PATCH_EDGE_M = 0.1  # a coarse-soil patch blends into the fine soil over this width
 # Bedrock: layered banding (layers about 4 cm thick, as in Burns formation outcrop), fine laminae, cracks.
 LAYER_THICKNESS_M = 0.04
 LAYER_CONTRAST = 0.07
@@ -66,14 +67,22 @@ class _Part(IntEnum):
 
 
 def albedo_texture(
-    terrain: Terrain, px_per_m: float, seed: int, *, fine_soil: bool = False, contrast: float = 1.0
+    terrain: Terrain,
+    px_per_m: float,
+    seed: int,
+    *,
+    fine_soil: bool = False,
+    contrast: float = 1.0,
+    patches: tuple[tuple[float, float, float, float], ...] = (),
 ) -> np.ndarray:
     """Relative albedo of the ground, ``(H, W)`` float32 in ``[0, 1]``, blended across materials.
 
     Sand: fine low-contrast speckle plus mottling (nearly featureless with ``fine_soil``). Bedrock: layered
     banding with higher contrast, plus dark cracks. Mixed: between the two, with pebbles. ``contrast`` scales
-    every deviation from the mean albedo of each material. Deterministic in
-    ``(terrain, px_per_m, seed, options)``.
+    every deviation from the mean albedo of each material. ``patches``: discs ``(x_m, y_m, radius_m, detail)``
+    of coarser soil inside fine soil, where the sand's detail is ``detail`` times the ordinary sand's (1.0:
+    ordinary soil texture) instead of ``FINE_SOIL_FACTOR``; the edge blends over ``PATCH_EDGE_M``. Deterministic
+    in ``(terrain, px_per_m, seed, options)``.
     """
     if not (px_per_m > 0.0 and math.isfinite(px_per_m)):
         raise ValueError(f"px_per_m must be a positive number, got {px_per_m}")
@@ -83,7 +92,7 @@ def albedo_texture(
     height = max(2, round(2.0 * terrain.half_y_m * px_per_m))
     x = -terrain.half_x_m + (np.arange(width) + 0.5) * (2.0 * terrain.half_x_m / width)
     y = -terrain.half_y_m + (np.arange(height) + 0.5) * (2.0 * terrain.half_y_m / height)
-    fields = _MaterialFields((height, width), x, y, px_per_m, seed, fine_soil, contrast)
+    fields = _MaterialFields((height, width), x, y, px_per_m, seed, fine_soil, contrast, patches)
 
     present = [Material(m) for m in np.unique(terrain.materials)]
     if len(present) == 1:
@@ -109,9 +118,10 @@ class _MaterialFields:
         seed: int,
         fine_soil: bool,
         contrast: float,
+        patches: tuple[tuple[float, float, float, float], ...] = (),
     ) -> None:
         self.shape, self.x, self.y, self.ppm, self.seed = shape, x_m, y_m, px_per_m, seed
-        self.fine_soil, self.contrast = fine_soil, contrast
+        self.fine_soil, self.contrast, self.patches = fine_soil, contrast, patches
         self._cache: dict[Material, np.ndarray] = {}
 
     def of(self, material: Material) -> np.ndarray:
@@ -127,8 +137,19 @@ class _MaterialFields:
     def _noise(self, part: _Part, sigma_px: float) -> np.ndarray:
         return smooth_noise(self.shape, sigma_px, layer_rng(self.seed, part))
 
+    def _sand_detail(self) -> float | np.ndarray:
+        """Sand detail factor per pixel: fine soil with coarser patches (see :func:`albedo_texture`)."""
+        if not self.fine_soil:
+            return 1.0
+        out: float | np.ndarray = FINE_SOIL_FACTOR
+        for px, py, radius, detail in self.patches:
+            r = np.hypot(self.x[None, :] - px, self.y[:, None] - py)
+            w = np.clip((radius - r) / PATCH_EDGE_M + 0.5, 0.0, 1.0)
+            out = np.maximum(out, FINE_SOIL_FACTOR + w * (detail - FINE_SOIL_FACTOR))
+        return out
+
     def _sand(self) -> np.ndarray:
-        detail = self.contrast * (FINE_SOIL_FACTOR if self.fine_soil else 1.0)
+        detail = self.contrast * self._sand_detail()
         speckle = self._noise(_Part.SAND_SPECKLE, 0.6)
         mottle = self._noise(_Part.SAND_MOTTLE, SAND_MOTTLE_SCALE_M * self.ppm)
         return SAND_ALBEDO + detail * (SAND_SPECKLE * speckle + SAND_MOTTLE * mottle)
@@ -162,7 +183,5 @@ def rock_albedo(rock: Rock, seed: int) -> float:
 
 def texture_rgb_u8(albedo: np.ndarray, tint: tuple[float, float, float] = MARS_TINT_RGB) -> np.ndarray:
     """``(H, W, 3)`` uint8 image: albedo times a tint (default Mars butterscotch), for MuJoCo textures."""
-    rgb = np.clip(
-        np.asarray(albedo, dtype=np.float32)[..., None] * np.asarray(tint, dtype=np.float32), 0.0, 1.0
-    )
+    rgb = np.clip(np.asarray(albedo, dtype=np.float32)[..., None] * np.asarray(tint, dtype=np.float32), 0.0, 1.0)
     return np.rint(rgb * 255.0).astype(np.uint8)

@@ -84,6 +84,9 @@ class VoParams:
     # motion forces a re-initialisation.
     reinit_max_translation_m: float = 0.75
     reinit_max_rotation_deg: float = 18.0
+    # A camera repointed between two pairs by at most this (mast pan/tilt) is tracked across, as the features are
+    # kept in the rover frame; 15 deg of a 45 deg navcam keeps >= 60 % overlap. Larger -> re-initialise.
+    max_repoint_deg: float = 15.0
 
     # --- guards against false positives (paper section 4.3: Sols 137/141 clustering, Sol 235 shadow) ---
     spread_grid_cells: int = 4  # inliers are binned into a spread_grid_cells x spread_grid_cells grid ...
@@ -120,21 +123,29 @@ class VoParams:
 
 @dataclass(frozen=True)
 class SanityConstraints:
-    """Optional limits on the VO *update* (paper section 2, Feb 2005 flight software).
+    """Limits on the VO *update* (paper section 2 step 8, Feb 2005 flight software; REFERENCE 3.4 step 8).
 
     The update is the VO motion minus the motion predicted by dead reckoning: its translation (expressed in
     the site frame when the previous attitude is given, else in the previous rover frame) and its
     roll/pitch/yaw change. ``None`` disables a limit. A violation counts as a failure to converge.
+
+    On by default with flight-like limits (issue #17). The paper gives the kinds of limit, not the values; these
+    follow from its numbers: a VO step is at most 75 cm (60 % overlap) and slip reached 125 % (Spirit, Sol 206),
+    so a true translation update stays under ~1 m; the IMU kept attitude well ("VO was used mostly to update
+    position"), so roll/pitch updates beyond a few degrees are VO errors, and yaw (gyro drift plus skid-steer
+    slip in a turn) gets more room. The downslope-angle limit stays off: across a slope the slip is a mix of
+    downslope and backward, so no single angle separates good from bad updates. Consecutive failures past
+    ``max_failures`` halt the drive (the runner's ``halted = "vo_failures"``), as flight software did.
     """
 
-    max_update_m: float | None = None  # |update translation|
-    max_update_x_m: float | None = None  # |site-frame X component| (rover frame if no attitude given)
-    max_update_y_m: float | None = None  # |site-frame Y component|
-    max_roll_update_deg: float | None = None
-    max_pitch_update_deg: float | None = None
-    max_yaw_update_deg: float | None = None
+    max_update_m: float | None = 1.0  # |update translation|: 75 cm step x 125 % slip, rounded up
+    max_update_x_m: float | None = 1.0  # |site-frame X component| (rover frame if no attitude given)
+    max_update_y_m: float | None = 1.0  # |site-frame Y component|
+    max_roll_update_deg: float | None = 5.0
+    max_pitch_update_deg: float | None = 5.0
+    max_yaw_update_deg: float | None = 10.0
     # angle between the translation update and the pure downslope direction (slip goes downhill); ignored for
     # updates shorter than min_update_for_direction_m or on level ground
     max_downslope_angle_deg: float | None = None
     min_update_for_direction_m: float = 0.02
-    max_failures: int | None = None  # consecutive failures tolerated before VoResult.failure_limit_reached
+    max_failures: int | None = 12  # consecutive failures tolerated before VoResult.failure_limit_reached

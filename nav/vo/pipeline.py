@@ -159,12 +159,14 @@ class VisualOdometry:
             return f"predicted step {t:.2f} m > {self.params.reinit_max_translation_m} m"
         if np.degrees(a) > self.params.reinit_max_rotation_deg:
             return f"predicted turn {np.degrees(a):.1f} deg > {self.params.reinit_max_rotation_deg} deg"
-        same_rig = (
-            np.allclose(prev.rig.left.T_rover_cam, rig.left.T_rover_cam, atol=1e-9)
-            and np.allclose(prev.rig.right.T_rover_cam, rig.right.T_rover_cam, atol=1e-9)
-            and np.allclose(prev.rig.left.K, rig.left.K)
-        )
-        return "" if same_rig else "camera repointed"
+        # A repointed mast (texture-seeking pointing) is fine while the views still overlap: the previous features
+        # live in the rover frame and are projected with the current rig. A larger repointing re-initialises.
+        same_cams = np.allclose(prev.rig.left.K, rig.left.K) and abs(prev.rig.baseline_m - rig.baseline_m) < 1e-6
+        R_rel = prev.rig.left.T_rover_cam[:3, :3].T @ rig.left.T_rover_cam[:3, :3]
+        turn = np.degrees(np.arccos(np.clip((np.trace(R_rel) - 1.0) / 2.0, -1.0, 1.0)))
+        if not same_cams or turn > self.params.max_repoint_deg:
+            return f"camera repointed by {turn:.1f} deg (> {self.params.max_repoint_deg} deg)"
+        return ""
 
     def _one_motion_in_view(self, tracks: FeatureTracks, rs: RansacResult, rig: StereoRig) -> tuple[RansacResult, str]:
         """Guard: two rigid motions in view (e.g. terrain and the rover's own shadow, Sol 235).

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from nav.camera import StereoRig
+from nav.camera import PinholeCamera, StereoRig
 from nav.geometry import se3_inv
 from nav.vo.features import (
     WindowStats,
@@ -109,7 +109,7 @@ def track_features(
     T_cur_prev = se3_inv(predicted_motion_rover)
     P_pred = prev.points_rover @ T_cur_prev[:3, :3].T + T_cur_prev[:3, 3]
     uv_pred = rig.left.project(_to_cam(rig.left.T_rover_cam, P_pred))
-    uv_t, cov_t = _track_left(prev, predicted_motion_rover, uv_pred, new_left, params)
+    uv_t, cov_t = _track_left(prev, predicted_motion_rover, uv_pred, new_left, params, rig.left)
     found = np.flatnonzero(np.isfinite(uv_t[:, 0]))
     # stereo re-match, searching only the disparities of depths within max_track_shift_m of the predicted 3D
     uv_int = np.round(uv_t[found])
@@ -141,7 +141,12 @@ def track_features(
 
 
 def _track_left(
-    prev: FeatureFrame, predicted_motion_rover: np.ndarray, uv_pred: np.ndarray, new_left: WindowStats, params: VoParams
+    prev: FeatureFrame,
+    predicted_motion_rover: np.ndarray,
+    uv_pred: np.ndarray,
+    new_left: WindowStats,
+    params: VoParams,
+    new_cam: PinholeCamera | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Correlation search for each previous feature around its predicted position in the new left image.
 
@@ -157,7 +162,9 @@ def _track_left(
     def search(src: WindowStats, dst: WindowStats, scale: float, centre: np.ndarray, idx: np.ndarray, r: int):
         uv, cov, score = np.full((n, 2), np.nan), np.full((n, 2, 2), np.nan), np.full(n, -np.inf)
         if params.track_warp_templates:
-            templates = warped_templates(prev, src.img, scale, predicted_motion_rover, uv_pred, params.window_px, idx)
+            templates = warped_templates(
+                prev, src.img, scale, predicted_motion_rover, uv_pred, params.window_px, idx, new_cam
+            )
         else:
             templates = {k: window_at(src.img, prev.uv_left[k] * scale, params.window_px) for k in idx}
         for k in idx:
@@ -191,6 +198,7 @@ def warped_templates(
     uv_pred: np.ndarray,
     window_px: int,
     which: np.ndarray | None = None,
+    new_cam: PinholeCamera | None = None,
 ) -> dict[int, np.ndarray | None]:
     """Previous left windows resampled as they should look in the new left image (view-change compensation).
 
@@ -199,13 +207,16 @@ def warped_templates(
     the previous to the new left image. Template pixel ``(j, i)`` is the previous image at
     ``H^-1(uv_pred + (j, i) / scale)``, so the template centre is the feature itself. ``img`` is the previous
     left image at resolution ``scale`` (1, or 0.5 for the pyrDown level; template pixels are pixels of that
-    level); ``which`` selects features (default all). Not in the paper (MER correlated unwarped windows); it
+    level); ``which`` selects features (default all); ``new_cam`` is the current left camera when the mast was
+    repointed between the pairs (default: the previous one). Not in the paper (MER correlated unwarped windows); it
     keeps the near field trackable when a step changes the scale of the ground by 20-30 %.
     """
     cam = prev.rig.left
-    K, Kinv = cam.K, np.linalg.inv(cam.K)
+    new_cam = cam if new_cam is None else new_cam
+    K, Kinv = new_cam.K, np.linalg.inv(cam.K)
     T_cam_rover = se3_inv(cam.T_rover_cam)
-    T_cc = T_cam_rover @ se3_inv(predicted_motion_rover) @ cam.T_rover_cam  # previous cam -> new cam coordinates
+    # previous cam -> new cam coordinates (the new camera may point elsewhere: texture-seeking pointing)
+    T_cc = se3_inv(new_cam.T_rover_cam) @ se3_inv(predicted_motion_rover) @ cam.T_rover_cam
     n_cam = T_cam_rover[:3, :3] @ np.array([0.0, 0.0, 1.0])
     dist = _to_cam(cam.T_rover_cam, prev.points_rover) @ n_cam  # plane n . X = dist through each feature
     h = window_px // 2

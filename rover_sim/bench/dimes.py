@@ -157,7 +157,10 @@ def bench_dimes(
     print("| check | measured | acceptance |")
     print("|---|---:|---|")
     print(f"| velocity error, 1 sigma (68 % of magnitudes) | {_f(total['sigma68'])} m/s | <= {ACCEPT_1SIGMA_MPS} m/s |")
-    print(f"| descents (accepted fraction) | {runs} ({total['accepted'] / max(runs, 1):.0%}) | >= 50 |")
+    print(
+        f"| descents (accepted fraction) | {runs} ({total['accepted'] / max(runs, 1):.0%}) | >= "
+        f"{acceptance.DIMES.min_runs} ({acceptance.DIMES.min_accepted_frac:.0%} accepted) |"
+    )
     print(
         f"| featureless plain: estimates rejected | {sum(o.estimate_mps is None for o in featureless)}/"
         f"{len(featureless)} ({', '.join(sorted({o.reason for o in featureless}))}) | all |"
@@ -179,6 +182,7 @@ def bench_dimes(
             and sigma <= ACCEPT_1SIGMA_MPS
             and featureless_rejected
             and runs >= acceptance.DIMES.min_runs
+            and total["accepted"] >= acceptance.DIMES.min_accepted_frac * runs
         ),
         "accepted_fraction": total["accepted"] / max(runs, 1),
         "velocity_error_rms_per_axis_mps": total["rms_axis"],

@@ -20,7 +20,12 @@ from rover_sim.resources import suite_baseline_path
 
 BASELINE = suite_baseline_path()
 # regression tolerances against the baseline
-VO_ERROR_SLACK_PCT = 0.5  # VO error may grow by this many percentage points (absolute)
+# VO error may grow by VO_ERROR_REL (relative) or VO_ERROR_SLACK_PCT percentage points, whichever is larger;
+# DR error and max slip may move by DR_SLIP_REL either way (they are physics: a change means the world changed)
+VO_ERROR_REL = 0.25
+VO_ERROR_SLACK_PCT = 0.1
+DR_SLIP_REL = 0.10
+DR_SLIP_FLOOR_PCT = 0.05  # ... plus this, so a near-zero value does not fail on rounding
 CONVERGENCE_SLACK_PCT = 5.0  # VO convergence may drop by this many points
 REL_TOLERANCE = 0.10  # --baseline FILE: a metric may get this much worse, relative to the file's value
 ABS_FLOOR_PCT = 0.05  # ... plus this (percentage points), so a baseline of 0 does not fail on noise
@@ -53,6 +58,10 @@ def _vo_case(scenario: str | Scenario, out_dir: Path, overrides: list[str]) -> d
         "vo_error_pct": m.vo_error_pct,
         "vo_convergence_pct": m.vo_convergence_pct,
         "false_positives": m.false_positives,
+        "vo_accepted": m.vo_accepted,
+        "vo_refused_reasons": dict(m.vo_refused_reasons),
+        "vo_refusals_justified": m.vo_refusals_justified,
+        "pointing_changes": m.pointing_changes,
         "max_slip_pct": m.max_slip_pct,
         "vo_step_ms_median": m.vo_step_ms_median,
         "passed": m.passed,
@@ -127,13 +136,20 @@ def all_passed(results: dict) -> bool:
 
 
 def _regressions(m: Metrics, base: dict | None) -> list[str]:
-    """Against the committed baseline: absolute slack on VO error and convergence, no new false positives."""
+    """Against the committed baseline, every stored metric: VO error +25 % relative or +0.1 pp (whichever is
+    larger), DR error and max slip within +-10 %, VO convergence -5 points, no new false positives."""
     if not base:
         return []
     out = []
     if m.vo_error_pct is not None and base.get("vo_error_pct") is not None:
-        if m.vo_error_pct > base["vo_error_pct"] + VO_ERROR_SLACK_PCT:
-            out.append(f"VO error {m.vo_error_pct} % > baseline {base['vo_error_pct']} % + {VO_ERROR_SLACK_PCT}")
+        was = base["vo_error_pct"]
+        limit = was + max(VO_ERROR_REL * was, VO_ERROR_SLACK_PCT)
+        if m.vo_error_pct > limit:
+            out.append(f"VO error {m.vo_error_pct} % > baseline {was} % (limit {limit:.3f} %)")
+    for key, label in (("dr_error_pct", "DR error"), ("max_slip_pct", "max slip")):
+        now, was = getattr(m, key), base.get(key)
+        if now is not None and was is not None and abs(now - was) > DR_SLIP_REL * abs(was) + DR_SLIP_FLOOR_PCT:
+            out.append(f"{label} {now} % differs from baseline {was} % by more than {100 * DR_SLIP_REL:g} %")
     if m.vo_convergence_pct is not None and base.get("vo_convergence_pct") is not None:
         if m.vo_convergence_pct < base["vo_convergence_pct"] - CONVERGENCE_SLACK_PCT:
             out.append(

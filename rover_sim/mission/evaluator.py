@@ -19,7 +19,17 @@ import numpy as np
 from nav.geometry import se3_inv
 from nav.trajectory import Pose, Trajectory, relative_errors
 
-FALSE_POSITIVE_M = 0.05  # an accepted VO update whose translation is off by more than this is a false positive
+# An accepted VO update whose translation error exceeds max(FALSE_POSITIVE_M, FALSE_POSITIVE_FRACTION x the true
+# step) is a false positive (issue #17: 2 cm, or 5 % of a 35-75 cm step; MER VO's error was < 1 % of distance).
+FALSE_POSITIVE_M = 0.02
+FALSE_POSITIVE_FRACTION = 0.05
+
+
+def false_positive_limit_m(step_m: float) -> float:
+    """The largest translation error of an accepted update that is not a false positive, for a ``step_m`` step."""
+    return max(FALSE_POSITIVE_M, FALSE_POSITIVE_FRACTION * abs(step_m))
+
+
 SLIP_WINDOW_M = 0.35  # commanded travel per slip sample when there are no VO steps (MER's VO step)
 MIN_SLIP_TRAVEL_M = 0.05  # steps commanding less travel than this (turns in place) give no slip sample
 # errors as a percentage of distance need a distance: below this path length (a mast-only run, a zero-length drive,
@@ -39,6 +49,13 @@ class VoStepRecord:
     error_m: float  # |VO translation - true translation| (NaN if no update)
     n_inliers: int
     ms: float
+    reason: str = ""  # why VO declined (empty when accepted)
+    no_texture: bool = False  # the pointing search found no pointing with texture: a refusal here is justified
+    true_step_m: float = math.nan  # |true translation| since the previous pair
+
+    @property
+    def false_positive(self) -> bool:
+        return self.status == "ok" and self.error_m > false_positive_limit_m(self.true_step_m)
 
 
 @dataclass
@@ -62,6 +79,9 @@ class Metrics:
     false_positives: int = 0
     vo_steps: int = 0
     vo_accepted: int = 0
+    vo_refused_reasons: dict = field(default_factory=dict)  # refusal status -> count
+    vo_refusals_justified: int = 0  # refusals on steps where no pointing had texture (logged)
+    pointing_changes: int = 0  # texture-seeking mast repointings
     max_vo_slip_pct: float | None = None
     body_collisions: int = 0  # ticks with the body (not a wheel) touching terrain or a rock
     tall_rock_contacts: int = 0  # ticks with any rover geom touching a rock >= TALL_ROCK_M tall
@@ -128,7 +148,15 @@ class Evaluator:
         self.tall_rock_contact_ticks += int(tall_rock_contact)
 
     def vo_step(
-        self, truth: Pose, status: str, motion_rover: np.ndarray | None, commanded_m: float, n_inliers: int, ms: float
+        self,
+        truth: Pose,
+        status: str,
+        motion_rover: np.ndarray | None,
+        commanded_m: float,
+        n_inliers: int,
+        ms: float,
+        reason: str = "",
+        no_texture: bool = False,
     ) -> VoStepRecord | None:
         """Score one VO step against the true motion since the previous pair (None for the first pair)."""
         T_truth = truth.as_matrix()
@@ -152,6 +180,9 @@ class Evaluator:
                 err,
                 n_inliers,
                 ms,
+                reason,
+                no_texture,
+                float(np.linalg.norm(true_motion[:3, 3])),
             )
             self.vo_steps.append(rec)
         self._last_frame_truth = T_truth
@@ -188,7 +219,11 @@ class Evaluator:
         judged = [s for s in steps if s.status not in ("first_frame", "reinit")]
         accepted = [s for s in judged if s.status == "ok"]
         conv = 100.0 * len(accepted) / len(judged) if judged else None
-        fps = sum(1 for s in accepted if s.error_m > FALSE_POSITIVE_M)
+        fps = sum(1 for s in accepted if s.false_positive)
+        refused = [s for s in judged if s.status != "ok"]
+        reasons: dict[str, int] = {}
+        for s in refused:
+            reasons[s.status] = reasons.get(s.status, 0) + 1
         true_slips = np.array([s.true_slip for s in steps if abs(s.commanded_m) > MIN_SLIP_TRAVEL_M], dtype=float)
         true_slips = true_slips[np.isfinite(true_slips)]
         vo_slips = np.array([s.vo_slip for s in accepted if abs(s.commanded_m) > MIN_SLIP_TRAVEL_M], dtype=float)
@@ -216,6 +251,8 @@ class Evaluator:
             false_positives=fps,
             vo_steps=len(judged),
             vo_accepted=len(accepted),
+            vo_refused_reasons=dict(sorted(reasons.items())),
+            vo_refusals_justified=sum(1 for s in refused if s.no_texture),
             max_vo_slip_pct=round(100 * float(np.max(vo_slips)), 2) if len(vo_slips) else None,
             body_collisions=self.body_collision_ticks,
             tall_rock_contacts=self.tall_rock_contact_ticks,

@@ -8,7 +8,9 @@ and an Observation holds only what flight software had on Mars:
   (computed at the commanded mast pointing, not the physically pointed mast);
 - IMU and wheel/steering encoder samples since the previous observation;
 - the commanded mast pointing;
-- the operator-given start pose of the drive (from the previous localisation and sun finding).
+- the operator-given start pose of the drive (from the previous localisation and sun finding);
+- the sun's direction in the site frame, from the ephemeris and the clock (MER computed it onboard from time; it
+  is knowledge, not a measurement of the simulated state).
 
 No pose, velocity, slip, sinkage or contact from the simulator appears here; those go to the evaluator only.
 """
@@ -51,6 +53,7 @@ class Observation:
     mast_pan_deg: float = 0.0  # commanded; left positive
     mast_elevation_deg: float = 0.0  # commanded; up positive
     start_pose: Pose | None = None  # operator-given start of the drive
+    sun_direction_world: np.ndarray | None = None  # ephemeris: unit vector sunlight travels along (site frame)
 
     def pair(self, camera: str) -> StereoImages:
         """The stereo pair of ``camera``; a clear error if this observation has none."""

@@ -13,6 +13,7 @@ honesty rule is a type, not a convention. Nothing here imports the simulator, th
 
 from __future__ import annotations
 
+import inspect
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -20,12 +21,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nav.camera import transform_points
+from nav.camera import StereoRig, transform_points
 from nav.dead_reckoning import DeadReckoner
+from nav.geometry import se3_inv
 from nav.protocols import Planner, StereoMatcher, VisualOdometer
 from nav.stereo import RangeImage, range_image_with
 from nav.trajectory import Pose
 from nav.types import ImuSample, RoverGeometry
+from nav.vo.params import VoParams
+from nav.vo.shadow import RoverShape, predict_shadow, vo_feature_mask
+from nav.vo.texture import points_in_view, trackable_points, view_overlap
 from rover_sim.mission.observation import Observation, require_observation
 
 # Hazcam look-ahead on MER: 3-4 m useful. At 256^2 (10 cm baseline) the disparity at 3.5 m is ~2 px and
@@ -44,6 +49,17 @@ def terrain_points(points_rover: np.ndarray) -> np.ndarray:
     return points_rover[(np.hypot(xy[:, 0], xy[:, 1]) < MAX_RANGE_M) & ~own]
 
 
+def accepts_feature_mask(vo: object) -> bool:
+    """Whether ``vo.step`` takes a ``feature_mask`` keyword (the built-in does; a plugin may)."""
+    if hasattr(vo, "takes_mask"):  # a guarded plugin says whether the wrapped step() declares it
+        return bool(vo.takes_mask)
+    try:
+        params = inspect.signature(vo.step).parameters  # type: ignore[attr-defined]
+    except (TypeError, ValueError):
+        return False
+    return "feature_mask" in params or any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values())
+
+
 def heading_rad(R_world_rover: np.ndarray) -> float:
     return float(math.atan2(R_world_rover[1, 0], R_world_rover[0, 0]))
 
@@ -59,6 +75,7 @@ class VoStep:
     ms: float
     predicted_motion_rover: np.ndarray  # the dead-reckoned motion VO was seeded with
     R_world_rover_prev: np.ndarray  # onboard attitude at the previous pair
+    feature_mask: np.ndarray | None = None  # False where features were barred (predicted shadow, rover hardware)
 
 
 @dataclass(frozen=True)
@@ -82,8 +99,10 @@ class Onboard:
         stereo: StereoMatcher,
         planner_factory: Callable[[], Planner],
         geometry: RoverGeometry | None = None,
+        shape: RoverShape | None = None,
     ) -> None:
         self.geometry = geometry or RoverGeometry()
+        self.shape = shape  # design data for the shadow prediction (None: no shadow masking)
         self.dead_reckoning = DeadReckoner(self.geometry, start_pose)  # wheels + IMU only, for comparison
         self.estimator = DeadReckoner(self.geometry, start_pose)  # corrected by VO: the pose the rover drives on
         self.vo = vo
@@ -92,6 +111,8 @@ class Onboard:
         self.planner: Planner | None = None
         self._imu_pending: list[ImuSample] = []
         self._last_frame_distance_m = 0.0
+        self._vo_takes_mask = vo is not None and accepts_feature_mask(vo)
+        self._last_pair: tuple | None = None  # (left, right, rig, mask) of the previous VO pair
 
     @property
     def pose(self) -> Pose:
@@ -120,7 +141,11 @@ class Onboard:
         commanded = est.distance_m - self._last_frame_distance_m
         prev_R = est.vo_frame_pose.R_world_rover
         t0 = time.perf_counter()
-        res = self.vo.step(pair.left_u8, pair.right_u8, pair.rig, pred, R_world_rover=prev_R)
+        mask = self.feature_mask(obs, camera) if self._vo_takes_mask else None
+        if mask is None:
+            res = self.vo.step(pair.left_u8, pair.right_u8, pair.rig, pred, R_world_rover=prev_R)
+        else:
+            res = self.vo.step(pair.left_u8, pair.right_u8, pair.rig, pred, R_world_rover=prev_R, feature_mask=mask)
         ms = (time.perf_counter() - t0) * 1e3
         ok = res.status == "ok"
         slip = 1.0 - float(res.motion_rover[0, 3]) / commanded if ok and abs(commanded) > 1e-3 else math.nan
@@ -129,10 +154,56 @@ class Onboard:
         else:
             est.mark_vo_frame()
         self._last_frame_distance_m = est.distance_m
-        return VoStep(res, commanded, slip, ms, pred, prev_R)
+        self._last_pair = (pair.left_u8, pair.right_u8, pair.rig, mask)
+        return VoStep(res, commanded, slip, ms, pred, prev_R, mask)
+
+    # ------------------------------------------------------------------ texture-seeking pointing (issue #17)
+    @property
+    def texture_params(self) -> VoParams:
+        return getattr(self.vo, "params", None) or VoParams()
+
+    @property
+    def ground_z_m(self) -> float:
+        return self.shape.ground_z_m if self.shape is not None else -self.geometry.body_height_m
+
+    def planned_view_texture(self, rig: StereoRig) -> int | None:
+        """Trackable features of the previous VO pair that the planned view ``rig`` will see after the
+        dead-reckoned motion (None before the first pair)."""
+        if self._last_pair is None:
+            return None
+        left, right, prev_rig, mask = self._last_pair
+        pts = trackable_points(left, right, prev_rig, self.texture_params, mask)
+        return points_in_view(pts, rig.left, se3_inv(self.estimator.predicted_motion_rover()))
+
+    def candidate_texture(self, obs: Observation, camera: str) -> tuple[int, float]:
+        """For a candidate pointing's pair: (its trackable features inside the previous pair's view, the
+        predicted ground overlap with the previous pair)."""
+        obs = require_observation(obs, "Onboard.candidate_texture")
+        pair = obs.pair(camera)
+        if self._last_pair is None:
+            return 0, 0.0
+        prev_rig, motion = self._last_pair[2], self.estimator.predicted_motion_rover()
+        overlap = view_overlap(prev_rig.left, pair.rig.left, motion, self.ground_z_m)
+        mask = self.feature_mask(obs, camera)
+        pts = trackable_points(pair.left_u8, pair.right_u8, pair.rig, self.texture_params, mask)
+        return points_in_view(pts, prev_rig.left, motion), overlap
+
+    def feature_mask(self, obs: Observation, camera: str) -> np.ndarray | None:
+        """False where the rover's own shadow (or the rover) is predicted in ``camera``'s left image: from the
+        ephemeris sun direction, the design shape, the calibrated camera model and the onboard attitude."""
+        obs = require_observation(obs, "Onboard.feature_mask")
+        if self.shape is None or obs.sun_direction_world is None:
+            return None
+        rig = obs.pair(camera).rig
+        T_navcam = rig.left.T_rover_cam if camera == "navcam" else None
+        pred = predict_shadow(
+            self.shape, rig.left, self.estimator.pose.R_world_rover, obs.sun_direction_world, T_navcam
+        )
+        return vo_feature_mask(pred)
 
     def reset_vo(self) -> None:
         """Forget the previous pair (the cameras were repointed)."""
+        self._last_pair = None
         if self.vo is not None:
             self.vo.reset()
 

@@ -31,6 +31,8 @@ from rover_sim.mission.evaluator import Evaluator, Metrics, VoStepRecord
 from rover_sim.mission.observation import Observation
 from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
 from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
+from rover_sim.mission.pointing import seek_texture
+from rover_sim.mission.rover_shape import rover_shape
 from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, TurnCmd
 from rover_sim.mission.world import World
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
@@ -74,12 +76,14 @@ class Mission:
                 vo=make_vo(nav.vo),
                 stereo=make_stereo(nav.stereo),
                 planner_factory=lambda: make_planner(nav.planner),
+                shape=rover_shape() if nav.vo.shadow_mask else None,
             )
         except BaseException:  # a plugin that does not load, or Ctrl-C: release the renderer's GL context
             self.world.close()
             raise
         self.evaluator = Evaluator(scenario.name, scenario.seed, self._last_goal(), has_vo=self.onboard.vo is not None)
         self.events: list[str] = []
+        self.pointing_changes = 0  # texture-seeking mast repointings before VO steps
         self.halted: Halt | None = None
         self.error: str | None = None
         self.interrupted: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM (errors.Terminated) stopped the run
@@ -268,14 +272,16 @@ class Mission:
         if self.onboard.vo is None:
             return None
         camera = self.sc.nav.camera
+        no_texture = seek_texture(self) if self.sc.nav.vo.seek_texture else False
         frame = self.world.render(camera)
         obs = self.world.observation_with([], [], {camera: frame})
         self.notify_images(obs)
         out = self.onboard.vo_step(obs, camera)
         res = out.result
         record = self.evaluator.vo_step(
-            self.world.truth_pose(), res.status, res.motion_rover, out.commanded_m, int(res.n_inliers), out.ms
-        )
+            self.world.truth_pose(), res.status, res.motion_rover, out.commanded_m, int(res.n_inliers), out.ms,
+            reason=str(getattr(res, "reason", "")), no_texture=no_texture,
+        )  # fmt: skip
         t = self.sim.time_s
         if record is not None:
             self.rec.log_scalars(
@@ -289,13 +295,15 @@ class Mission:
             )
             if res.status != "ok":
                 self.event(f"VO {res.status}: {res.reason}", "WARN")
-            elif record.error_m > acceptance.FALSE_POSITIVE_M:
+            elif record.false_positive:
                 self.event(f"VO accepted an update {100 * record.error_m:.1f} cm off (false positive)", "ERROR")
         if res.status == "ok":
             self.record_poses()  # the corrected pose at the frame time
         for listener in self.vo_listeners:
             listener(out, obs.pair(camera).rig.left.T_rover_cam)
         self.log_frame(obs, camera, res)
+        if getattr(res, "failure_limit_reached", False):  # MER flight software: too many VO failures stop the drive
+            raise Halt("vo_failures", f"VO failed to converge on too many consecutive steps (last: {res.status})")
         limit = self.sc.nav.slip_limit
         if limit is not None and record is not None and res.status == "ok" and abs(out.commanded_m) > 0.05:
             if out.vo_slip > limit:
@@ -398,6 +406,7 @@ class Mission:
             extra=extra,
             timing=timing,
         )
+        m.pointing_changes = self.pointing_changes
         m.passed, m.reason = acceptance.judge(
             m,
             self.sc.passing,

@@ -105,6 +105,12 @@ class GuardedVO:
 
     def __init__(self, impl: VisualOdometer, name: str) -> None:
         self.impl, self.name = impl, name
+        try:
+            params = inspect.signature(impl.step).parameters
+        except (TypeError, ValueError):
+            params = {}
+        # the shadow mask is offered only to a plugin whose step() declares it (nav.protocols.VisualOdometer)
+        self.takes_mask = "feature_mask" in params or any(p.kind is p.VAR_KEYWORD for p in params.values())
 
     def reset(self) -> None:
         try:
@@ -112,9 +118,11 @@ class GuardedVO:
         except Exception as err:  # noqa: BLE001 - user code
             raise PluginError(self.name, "reset()", f"raised {type(err).__name__}: {err}") from None
 
-    def step(self, left_u8: np.ndarray, right_u8: np.ndarray, rig, predicted_motion_rover=None, R_world_rover=None):  # noqa: ANN001, ANN201
+    def step(self, left_u8: np.ndarray, right_u8: np.ndarray, rig, predicted_motion_rover=None, R_world_rover=None,  # noqa: ANN001, ANN201
+             **kw):  # fmt: skip
+        extra = {"feature_mask": kw["feature_mask"]} if self.takes_mask and "feature_mask" in kw else {}
         try:
-            res = self.impl.step(left_u8, right_u8, rig, predicted_motion_rover, R_world_rover=R_world_rover)
+            res = self.impl.step(left_u8, right_u8, rig, predicted_motion_rover, R_world_rover=R_world_rover, **extra)
         except Exception as err:  # noqa: BLE001 - user code
             raise PluginError(self.name, "step()", f"raised {type(err).__name__}: {err}") from None
         try:

@@ -34,12 +34,27 @@ class SunSpec(_Spec):
     shadows: bool = True
 
 
+class TexturePatch(_Spec):
+    """A disc of coarser soil (granules, drift edges, old tracks) inside ``fine_soil``: where texture exists."""
+
+    x_m: float = Field(ge=-1.0e4, le=1.0e4)
+    y_m: float = Field(ge=-1.0e4, le=1.0e4)
+    radius_m: float = Field(gt=0.0, le=100.0)
+    detail: float = Field(1.0, gt=0.0, le=2.0, description="Sand detail relative to ordinary soil (1 = ordinary).")
+
+
 class AppearanceSpec(_Spec):
-    """Ground albedo: ``fine_soil`` makes sand nearly featureless (Meridiani plains) to starve stereo and VO."""
+    """Ground albedo: ``fine_soil`` makes sand nearly featureless (Meridiani plains) to starve stereo and VO;
+    ``texture_patches`` state where, inside it, the soil is coarse enough to track (the scenario says where
+    texture exists, issue #17)."""
 
     fine_soil: bool = False
     contrast: float = Field(1.0, gt=0.0, le=3.0, description="Albedo contrast multiplier.")
     texture_px_per_m: float = Field(100.0, ge=10.0, le=200.0, description="Texels per metre (capped by GL size).")
+    texture_patches: list[TexturePatch] = Field(default_factory=list, max_length=200)
+
+    def patch_tuples(self) -> tuple[tuple[float, float, float, float], ...]:
+        return tuple((p.x_m, p.y_m, p.radius_m, p.detail) for p in self.texture_patches)
 
 
 class StartSpec(_Spec):
@@ -50,8 +65,7 @@ class StartSpec(_Spec):
 
 BUILTIN = "builtin"
 IMPL_DESCRIPTION = (
-    '"builtin", an import path "package.module:Class", or the name of an entry point in the group '
-    '"rover_sim.plugins"'
+    '"builtin", an import path "package.module:Class", or the name of an entry point in the group "rover_sim.plugins"'
 )
 
 
@@ -81,11 +95,13 @@ class VoSpec(_Spec):
     impl: str = Field(BUILTIN, min_length=1, description=IMPL_DESCRIPTION)
     sanity: SanityConstraints = Field(default_factory=SanityConstraints)
     params: VoParams = Field(default_factory=VoParams)
+    shadow_mask: bool = Field(True, description="Bar features in and near the rover's predicted shadow (issue #17).")
+    seek_texture: bool = Field(True, description="Repoint the mast at texture when the planned view is poor.")
 
     @model_validator(mode="before")
     @classmethod
     def _flat(cls, data: Any) -> Any:
-        return _split_params(data, ("enabled", "impl", "sanity"), "enabled")
+        return _split_params(data, ("enabled", "impl", "sanity", "shadow_mask", "seek_texture"), "enabled")
 
 
 class StereoSpec(_Spec):
@@ -204,10 +220,15 @@ class PassSpec(_Spec):
     min_dr_error_pct: float | None = Field(None, ge=0.0, le=1000.0)
     max_dr_error_pct: float | None = Field(None, gt=0.0, le=1000.0)
     min_vo_convergence_pct: float | None = Field(None, ge=0.0, le=100.0)
+    justified_refusals: bool = Field(
+        False,
+        description="min_vo_convergence_pct counts only steps where some pointing had texture: a refusal logged as "
+        "'no pointing had texture' is justified (featureless ground, issue #17).",
+    )
     min_max_slip_pct: float | None = Field(None, ge=0.0, le=500.0)
     max_max_slip_pct: float | None = Field(None, ge=0.0, le=500.0)
     max_false_positives: int | None = Field(None, ge=0, le=1000)
-    expect_halt: Literal["keep_out", "slip_limit"] | None = None
+    expect_halt: Literal["keep_out", "slip_limit", "vo_failures"] | None = None
     expect_dead_reckoning_clear: bool = Field(
         False, description="At a keep-out halt, dead reckoning alone still believes the rover outside the zone."
     )

@@ -46,6 +46,7 @@ class World:
             scenario.seed,
             fine_soil=ap.fine_soil,
             contrast=ap.contrast,
+            patches=ap.patch_tuples(),
         )
         self.sim = RoverSim(
             self.terrain,
@@ -66,6 +67,8 @@ class World:
         )
         self._rigs: dict[str, StereoRig] = {}
         self.calibrate(scenario.nav.camera)
+        # the ephemeris: the sun's direction over the site (fixed over a drive of minutes)
+        self.sun_direction_world = Sun(scenario.sun.azimuth_deg, scenario.sun.elevation_deg).direction()
         # the operator-given start of the drive (previous localisation and sun finding), fixed once settled
         self.operator_start_pose = Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz())
 
@@ -104,6 +107,7 @@ class World:
             mast_pan_deg=self.mast_pan_deg,
             mast_elevation_deg=self.mast_elevation_deg,
             start_pose=self.operator_start_pose,
+            sun_direction_world=self.sun_direction_world,
         )
 
     # ------------------------------------------------------------------ ground truth (never onboard)

@@ -168,7 +168,13 @@ def check_gl() -> None:
 
 
 def terrain_texture(
-    terrain: Terrain, px_per_m: float = 100.0, seed: int = 0, *, fine_soil: bool = False, contrast: float = 1.0
+    terrain: Terrain,
+    px_per_m: float = 100.0,
+    seed: int = 0,
+    *,
+    fine_soil: bool = False,
+    contrast: float = 1.0,
+    patches: tuple[tuple[float, float, float, float], ...] = (),
 ) -> np.ndarray:
     """RGB uint8 ground texture for ``RoverSim(terrain, texture_rgb=...)``: terrains' albedo times the Mars tint.
 
@@ -184,7 +190,8 @@ def terrain_texture(
             f"a {side_px:.0f} px texture exceeds the {MAX_TEXTURE_PX} px GL limit; lower px_per_m to "
             f"{MAX_TEXTURE_PX / (2.0 * max(terrain.half_x_m, terrain.half_y_m)):.0f} or less"
         )
-    return texture_rgb_u8(albedo_texture(terrain, px_per_m, seed, fine_soil=fine_soil, contrast=contrast))
+    albedo = albedo_texture(terrain, px_per_m, seed, fine_soil=fine_soil, contrast=contrast, patches=patches)
+    return texture_rgb_u8(albedo)
 
 
 def luminance_u8(rgb: np.ndarray) -> np.ndarray:

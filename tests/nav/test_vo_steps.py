@@ -296,8 +296,37 @@ def test_sanity_constraints_reject_too_large_update():
     assert not ok and "magnitude" in why
     ok, why = sanity_check(se3(rpy_to_R(0, 0, np.radians(5)), pred[:3, 3]), pred, c)
     assert not ok and "yaw" in why
-    ok, _ = sanity_check(vo_large, pred, SanityConstraints())  # no limits: anything goes
+    off = SanityConstraints(**{k: None for k in SanityConstraints.__dataclass_fields__ if k.startswith("max_")})
+    ok, _ = sanity_check(vo_large, pred, off)  # no limits: anything goes
     assert ok
+
+
+@pytest.mark.parametrize(
+    ("motion", "word"),
+    [
+        (se3(np.eye(3), np.array([1.5, 0.0, 0.0])), "magnitude"),  # 1.15 m update > 1 m
+        (se3(np.eye(3), np.array([0.35, 0.0, 0.0])) @ se3(rpy_to_R(np.radians(8), 0, 0), np.zeros(3)), "roll"),
+        (se3(np.eye(3), np.array([0.35, 0.0, 0.0])) @ se3(rpy_to_R(0, np.radians(8), 0), np.zeros(3)), "pitch"),
+        (se3(np.eye(3), np.array([0.35, 0.0, 0.0])) @ se3(rpy_to_R(0, 0, np.radians(15)), np.zeros(3)), "yaw"),
+    ],
+)
+def test_default_sanity_constraints_reject_a_crafted_bad_update(motion, word):
+    """Issue #17: MER's step-8 constraints are on by default with flight-like limits."""
+    pred = se3(np.eye(3), np.array([0.35, 0.0, 0.0]))
+    c = SanityConstraints()
+    assert sanity_check(pred, pred, c) == (True, "")
+    ok, why = sanity_check(motion, pred, c)
+    assert not ok and word in why, why
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_default_sanity_constraints_limit_each_site_axis(axis):
+    pred = se3(np.eye(3), np.array([0.35, 0.0, 0.0]))
+    t = np.array([0.35, 0.0, 0.0])
+    t[axis] += 1.05  # an x or y update just over 1 m
+    c = SanityConstraints(max_update_m=None)
+    ok, why = sanity_check(se3(np.eye(3), t), pred, c, np.eye(3))
+    assert not ok and f"update {'XY'[axis]}" in why, why
 
 
 def test_sanity_downslope_angle_and_site_frame_components():

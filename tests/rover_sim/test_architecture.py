@@ -155,4 +155,13 @@ def test_onboard_refuses_anything_but_an_observation(onboard):
 
 def test_observation_holds_no_truth_fields():
     names = set(Observation.__dataclass_fields__)
-    assert names == {"t_s", "imu", "encoders", "images", "mast_pan_deg", "mast_elevation_deg", "start_pose"}
+    assert names == {
+        "t_s",
+        "imu",
+        "encoders",
+        "images",
+        "mast_pan_deg",
+        "mast_elevation_deg",
+        "start_pose",
+        "sun_direction_world",
+    }
