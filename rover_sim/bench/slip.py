@@ -22,6 +22,7 @@ from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRe
 
 SLOPES_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
 START_X_M = -5.0
+CELL_M = 0.04  # the scenarios' cell size
 
 
 @dataclass(frozen=True)
@@ -33,11 +34,13 @@ class SlipRow:
     made_good_m: float
 
 
-def slope_terrain(material: str, slope_deg: float, seed: int = 0, size_m: tuple[float, float] = (16.0, 8.0)):
+def slope_terrain(
+    material: str, slope_deg: float, seed: int = 0, size_m: tuple[float, float] = (16.0, 8.0), cell_size_m: float = CELL_M
+):
     """A uniform planar slope rising toward +x."""
     recipe = TerrainRecipe(
         size_m=size_m,
-        cell_size_m=0.1,
+        cell_size_m=cell_size_m,
         slope=SlopeSpec(slope_deg=slope_deg, azimuth_deg=0.0),
         roughness=RoughnessSpec(rms_m=0.0),
         rocks=RockSpec(cover_fraction=0.0),
@@ -47,7 +50,12 @@ def slope_terrain(material: str, slope_deg: float, seed: int = 0, size_m: tuple[
 
 
 def measure_slip(
-    material: str, slope_deg: float, drive_m: float = 3.0, warmup_m: float = 0.5, seed: int = 0
+    material: str,
+    slope_deg: float,
+    drive_m: float = 3.0,
+    warmup_m: float = 0.5,
+    seed: int = 0,
+    speed_m_s: float = MAX_WHEEL_SPEED_M_S,
 ) -> SlipRow:
     sim = RoverSim(slope_terrain(material, slope_deg, seed))
     sim.place(START_X_M, 0.0, 0.0)
@@ -60,15 +68,15 @@ def measure_slip(
             mark["p0"], mark["a0"], mark["x_axis"] = s.position_m(), s.wheel_angles_rad().mean(), s.rotation()[:, 0]
         return None
 
-    execute(sim, Straight(drive_m), speed_m_s=MAX_WHEEL_SPEED_M_S, on_tick=on_tick)
+    execute(sim, Straight(drive_m), speed_m_s=speed_m_s, on_tick=on_tick)
     commanded = (sim.wheel_angles_rad().mean() - mark["a0"]) * r
     made_good = float(np.dot(sim.position_m() - mark["p0"], mark["x_axis"]))
     return SlipRow(material, slope_deg, 1.0 - made_good / commanded, float(commanded), made_good)
 
 
-def parked_drift_m(slope_deg: float = 30.0, hold_s: float = 60.0, seed: int = 0) -> float:
-    """Displacement of a rover parked (wheels held) on a bedrock slope over ``hold_s``."""
-    sim = RoverSim(slope_terrain("bedrock", slope_deg, seed))
+def parked_drift_m(slope_deg: float = 30.0, hold_s: float = 60.0, seed: int = 0, material: str = "bedrock") -> float:
+    """Displacement of a rover parked (wheels held) on a slope of ``material`` over ``hold_s``."""
+    sim = RoverSim(slope_terrain(material, slope_deg, seed))
     sim.place(0.0, 0.0, 0.0, settle_s=2.0)
     p0 = sim.position_m()
     sim.step_for(hold_s)

@@ -121,6 +121,7 @@ class RoverSim:
             m.geom(f"{ROCK_GEOM_PREFIX}{i:04d}").id: i for i in range(len(terrain.rocks))
         }  # rock geom id -> index into terrain.rocks
         self._wheel_free = np.ones(6)  # 0 for a locked (held, dragged) wheel
+        self.deform = None  # DeformableTerrain, attached by enable_deformation()
         self._substep_hook: Callable[[RoverSim], None] | None = None
         self._substep_every = 1
         self._substep_count = 0
@@ -211,15 +212,25 @@ class RoverSim:
     def _apply_soil_law(self, dt: float) -> None:
         sd = self._sd_view.tolist()  # all wheel-soil inputs in one read (layout: models/mer/rover.xml)
         pos = [(sd[k], sd[k + 1], sd[k + 2]) for k in (4, 11, 18, 25, 32, 39)]
-        f = self.law.evaluate(sd, self._material_under(pos), dt)
+        law = self.law
+        mats = self._material_under(pos)
+        f = law.evaluate(sd, mats, dt)
         com = self._xipos[self._wheel_body].tolist()
+        axles = law.axles
         wrench = self._wrench
         for w in range(6):
-            fx, fy, fz = f[3 * w], f[3 * w + 1], f[3 * w + 2]
+            o = 4 * w
+            fx, fy, fz, T = f[o], f[o + 1], f[o + 2], f[o + 3]
             (px, py, pz), (cx, cy, cz) = pos[w], com[w]
             rx, ry, rz = px - cx, py - cy, pz - cz
-            wrench[w] = (fx, fy, fz, ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx)
+            mx, my, mz = ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx
+            # the soil's torque about the axle is the law's T (resisting the spin), not the lever of the net force
+            ax, ay, az = axles[w]
+            corr = -T - (mx * ax + my * ay + mz * az)
+            wrench[w] = (fx, fy, fz, mx + corr * ax, my + corr * ay, mz + corr * az)
         self._xfrc[self._wheel_body] = wrench
+        if self.deform is not None:
+            self.deform.after_law(self, pos, mats)
 
     def _material_under(self, pos: list[tuple[float, float, float]]) -> list[int]:
         """Material index under each wheel contact; a contact well above the heightfield is on a rock."""
