@@ -35,7 +35,11 @@ class SlipRow:
 
 
 def slope_terrain(
-    material: str, slope_deg: float, seed: int = 0, size_m: tuple[float, float] = (16.0, 8.0), cell_size_m: float = CELL_M
+    material: str,
+    slope_deg: float,
+    seed: int = 0,
+    size_m: tuple[float, float] = (16.0, 8.0),
+    cell_size_m: float = CELL_M,
 ):
     """A uniform planar slope rising toward +x."""
     recipe = TerrainRecipe(

@@ -228,6 +228,9 @@ class Mission:
         if self.progress is not None:
             self.progress(t, "")
         self.check_keep_out()
+        issue = sim.safety_issue()
+        if issue is not None:
+            raise Halt(*issue)
         return None
 
     def record_poses(self) -> Pose:

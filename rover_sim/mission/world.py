@@ -53,6 +53,7 @@ class World:
             texture_rgb=texture,
             timestep_s=scenario.physics.timestep_s,
         )
+        self.sim.enable_deformation()  # ruts, berms, multipass (rover_sim/sim/deform.py)
         self.sim.lock_wheels(list(scenario.faults.locked_wheels))
         st = scenario.start
         self.sim.place(st.x_m, st.y_m, math.radians(st.yaw_deg))

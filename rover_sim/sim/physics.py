@@ -11,6 +11,7 @@ import numpy as np
 
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
+from rover_sim.sim.deform import DeformableTerrain
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
 from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
@@ -128,6 +129,16 @@ class RoverSim:
         self.reset()
 
     # ------------------------------------------------------------------ setup
+    def enable_deformation(self) -> DeformableTerrain:
+        """Make the heightfield deformable under the wheels (ruts, berms, multipass; see sim/deform.py)."""
+        if self.deform is None:
+            self.deform = DeformableTerrain(self, tuple(m.deformable for m in self.law.materials))
+        return self.deform
+
+    def terrain_heights_m(self) -> np.ndarray:
+        """The current ground heights on the terrain's grid (the deformed surface when deformation is on)."""
+        return self.deform.heights_m() if self.deform is not None else np.asarray(self.terrain.heights_m).copy()
+
     def _sensor_slice(self, name: str) -> slice:
         s = self.model.sensor(name)
         return slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
@@ -241,6 +252,27 @@ class RoverSim:
             on_rock = z > self._h_list[i][j] + ROCK_CONTACT_MARGIN_M
             out.append(MATERIAL_ROCK if on_rock else self._mat_list[i][j])
         return out
+
+    def safety_issue(self, margin_m: float = 0.3, slide_speed_m_s: float = 0.15) -> tuple[str, str] | None:
+        """``("left_terrain", why)`` when a wheel is within ``margin_m`` of the heightfield's edge or the rover is
+        below the ground, ``("slid_down_slope", why)`` when the rover moves faster than any drive command could
+        move it (MER's wheels turn at most 5 cm/s): the slope is too steep for the soil to hold. None otherwise."""
+        t = self.time_s
+        c = self.wheel_centres_m()
+        hx, hy = self._half_x - margin_m, self._half_y - margin_m
+        if (abs(c[:, 0]) > hx).any() or (abs(c[:, 1]) > hy).any():
+            p = self.position_m()
+            return "left_terrain", f"the rover left the terrain at t = {t:.1f} s (at x {p[0]:.2f}, y {p[1]:.2f} m)"
+        ground = self.terrain.height_at(c[:, 0], c[:, 1])
+        if (c[:, 2] < ground - 0.2).any():
+            return "left_terrain", f"the rover fell through the ground at t = {t:.1f} s"
+        v = float(np.linalg.norm(self.data.qvel[0:3]))
+        if v > slide_speed_m_s:
+            return "slid_down_slope", (
+                f"the rover slid down the slope at t = {t:.1f} s ({v:.2f} m/s; the wheels drive at most 0.05 m/s):"
+                " the soil cannot hold this slope"
+            )
+        return None
 
     def _check_divergence(self) -> None:
         d = self.data

@@ -182,6 +182,13 @@ class WheelSoilLaw:
         """(n,) contact length of the last evaluation, metres."""
         return np.array(self._patch)
 
+    def out_state(self) -> list[list[float]]:
+        """The last evaluation's raw per-wheel lists (load, sinkage, slip, f_long, f_lat, contact, torque)."""
+        return self._out
+
+    def patch_length(self, wheel: int) -> float:
+        return self._patch[wheel]
+
     @property
     def state(self) -> WheelSoilState:
         W, z, slip, fl, ft, c, tq = self._out
