@@ -60,8 +60,11 @@ def measure_slip(
     warmup_m: float = 0.5,
     seed: int = 0,
     speed_m_s: float = MAX_WHEEL_SPEED_M_S,
+    deform: bool = True,
 ) -> SlipRow:
     sim = RoverSim(slope_terrain(material, slope_deg, seed))
+    if deform:
+        sim.enable_deformation()
     sim.place(START_X_M, 0.0, 0.0)
     r = sim.law.radius_m
     mark: dict[str, np.ndarray] = {}

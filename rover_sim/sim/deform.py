@@ -94,7 +94,7 @@ class DeformableTerrain:
             hn = math.hypot(hx, hy) or 1.0
             hx, hy = hx / hn, hy / hn
             lp = law.patch_length(w)
-            lead = 0.5 * lp + 1.5 * self._cell
+            lead = 0.5 * lp + UPDATE_M + 2.5 * self._cell  # beyond this wheel's own footprint
             law.presink_m[w] = max(self.rut_depth_at(px + lead * hx, py + lead * hy), 0.0)
             lx, ly, lz = self._last[w]
             z = self._zf[w] = self._zf[w] + self._alpha * (z_all[w] - self._zf[w])
@@ -105,9 +105,11 @@ class DeformableTerrain:
 
     def _write_rut(self, px: float, py: float, hx: float, hy: float, z: float, lp: float, width: float) -> None:
         cell = self._cell
-        half_l, half_w = 0.5 * lp + 0.5 * cell, 0.5 * width
+        # behind: the patch; ahead: the patch plus the travel until the next write and a cell, so that the
+        # collision sphere never meets the rut's front edge (the law already resists the motion: no double count)
+        back, front, half_w = 0.5 * lp + 0.5 * cell, 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
         reach = half_w + BERM_CELLS * cell
-        span = int(math.ceil(max(half_l, reach) / cell)) + 1
+        span = int(math.ceil(max(front, reach) / cell)) + 1
         ci, cj = self._cell_of(px, py)
         h, h0, soft = self._h, self._h0, self._soft
         displaced = 0.0
@@ -120,7 +122,7 @@ class DeformableTerrain:
                     continue
                 dx = self._x0 + j * cell - px
                 along, across = dx * hx + dy * hy, abs(-dx * hy + dy * hx)
-                if abs(along) > half_l:
+                if along > front or along < -back:
                     continue
                 if across <= half_w:
                     target = row_h0[j] - z
