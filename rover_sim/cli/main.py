@@ -41,11 +41,12 @@ def check_gl_cmd() -> None:
 
 
 @bench_app.command("slip")
-def bench_slip(json: JsonOpt = None, seed: int = 0) -> None:
-    """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
-    from rover_sim.bench import slip
+def bench_slip(json: JsonOpt = None, seed: int = 0, png: str = "runs/bench_slip.png") -> None:
+    """The mobility benchmark: uphill slip vs the MER anchors, held-out checks (speed, parked, cross-slope, locked
+    wheel, ruts), physics speed with the deformable terrain; JSON and a PNG (DP/W vs slip, slip vs slope)."""
+    from rover_sim.bench import mobility as slip
 
-    result = slip.run(str(json) if json else None, seed=seed)
+    result = slip.run(str(json) if json else None, seed=seed, png_path=png)
     if not result["all_pass"]:
         raise typer.Exit(code=1)
 

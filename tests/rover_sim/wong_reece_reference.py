@@ -42,8 +42,16 @@ def wheel(soil, r: float, b: float, load_n: float, slip: float) -> dict[str, flo
         th1 = math.acos(max(1.0 - z / r, -1.0))
         thm = (soil.a0 + soil.a1 * slip) * th1
         pts = [thm]
-        W = r * b * quad(lambda t: _sigma(t, th1, thm, k, n, r) * math.cos(t) + tau(t, th1, thm) * math.sin(t),
-                         0.0, th1, points=pts)[0]
+        W = (
+            r
+            * b
+            * quad(
+                lambda t: _sigma(t, th1, thm, k, n, r) * math.cos(t) + tau(t, th1, thm) * math.sin(t),
+                0.0,
+                th1,
+                points=pts,
+            )[0]
+        )
         H = r * b * quad(lambda t: tau(t, th1, thm) * math.cos(t), 0.0, th1, points=pts)[0]
         R = r * b * quad(lambda t: _sigma(t, th1, thm, k, n, r) * math.sin(t), 0.0, th1, points=pts)[0]
         T = r * r * b * quad(lambda t: tau(t, th1, thm), 0.0, th1, points=pts)[0]
