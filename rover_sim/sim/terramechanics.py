@@ -57,7 +57,7 @@ SAND = SoilParams(
     cohesion_pa=200.0,
     friction_angle_deg=34.0,
     shear_modulus_m=0.025,
-    lateral_shear_modulus_m=0.025,
+    lateral_shear_modulus_m=0.010,
     k_c=1.4e4,
     k_phi=2.3e6,
     n0=1.0,
@@ -214,7 +214,15 @@ class WheelSoilLaw:
         k = iv * N_LOAD + iu
         a, b, c, d = rows[k], rows[k + 1], rows[k + N_LOAD], rows[k + N_LOAD + 1]
         w00, w01, w10, w11 = (1 - fv) * (1 - fu), (1 - fv) * fu, fv * (1 - fu), fv * fu
-        return tuple(w00 * a[q] + w01 * b[q] + w10 * c[q] + w11 * d[q] for q in range(7))
+        return (
+            w00 * a[0] + w01 * b[0] + w10 * c[0] + w11 * d[0],
+            w00 * a[1] + w01 * b[1] + w10 * c[1] + w11 * d[1],
+            w00 * a[2] + w01 * b[2] + w10 * c[2] + w11 * d[2],
+            w00 * a[3] + w01 * b[3] + w10 * c[3] + w11 * d[3],
+            w00 * a[4] + w01 * b[4] + w10 * c[4] + w11 * d[4],
+            w00 * a[5] + w01 * b[5] + w10 * c[5] + w11 * d[5],
+            w00 * a[6] + w01 * b[6] + w10 * c[6] + w11 * d[6],
+        )
 
     def sinkage_m(self, normal_force_n: float, material: int, slip: float) -> float:
         """Steady-state sinkage under ``normal_force_n`` at ``slip`` (step 2)."""
