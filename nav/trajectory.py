@@ -118,8 +118,15 @@ class Trajectory:
 # TUM format: one pose per line, "t x y z qx qy qz qw" (scalar last), '#' comments
 # ----------------------------------------------------------------------------------------------------------------
 def write_tum(traj: Trajectory, path: str | Path) -> None:
-    q = traj.orientations_quat_wxyz
-    data = np.column_stack([traj.t_s, traj.positions_xyz, q[:, 1], q[:, 2], q[:, 3], q[:, 0]])
+    """TUM ``t x y z qx qy qz qw`` lines, timestamps strictly increasing: of poses sharing a timestamp (an estimate
+    sampled again before its next update, or the VO-corrected pose at a frame time) the last one is written."""
+    t = np.asarray(traj.t_s, dtype=float)
+    keep = np.ones(len(t), dtype=bool)
+    if len(t) > 1:
+        keep[:-1] = t[1:] > t[:-1]  # last of each run of equal stamps
+        keep &= t >= np.maximum.accumulate(t)  # and never a stamp older than one already seen
+    q = traj.orientations_quat_wxyz[keep]
+    data = np.column_stack([t[keep], traj.positions_xyz[keep], q[:, 1], q[:, 2], q[:, 3], q[:, 0]])
     np.savetxt(path, data, fmt="%.9f", header="t x y z qx qy qz qw")
 
 

@@ -62,3 +62,8 @@ class PluginError(RoverSimError):
     def __init__(self, plugin: str, where: str, problem: str) -> None:
         self.plugin, self.where, self.problem = plugin, where, problem
         super().__init__(f"plugin {plugin}: {where}: {problem}")
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived (a CI timeout, ``kill``, a batch scheduler): handled like Ctrl-C, so the run stops cleanly
+    and keeps what it recorded (see :mod:`rover_sim.interrupts`); the CLI exits 143 instead of 130."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rover_sim import interrupts
 from rover_sim.bench import write_json
 from rover_sim.mission import acceptance
 from rover_sim.mission.run import run_scenario
@@ -66,16 +67,20 @@ def run_field(seed: int, overrides: tuple[str, ...] = ()) -> dict:
         "cycle_ms_median": m.timing.get("autonav_cycle_ms_median"),
         "outcome": a.get("outcome"),
         "distance_m": m.distance_m,
+        "reason": m.reason,
+        # the field did not run to its end (physics diverged, a plugin raised; or Ctrl-C / SIGTERM)
+        "error": m.reason if m.reason.startswith("run did not complete") else None,
     }
 
 
-def _print_row(r: dict) -> None:
-    print(
-        f"seed {r['seed']:2d}: {'reached' if r['reached'] else 'MISSED '} {r['goal_distance_m']:.2f} m from goal, "
+def _row_line(r: dict) -> str:
+    goal = "-" if r["goal_distance_m"] is None else f"{r['goal_distance_m']:.2f}"
+    line = (
+        f"seed {r['seed']:2d}: {'reached' if r['reached'] else 'MISSED '} {goal} m from goal, "
         f"{'COLLISION' if r['collision'] else 'no collision'}, {r['cycles']} cycles, {r['distance_m']:.1f} m "
-        f"driven, {r['outcome']}",
-        flush=True,
+        f"driven, {r['outcome']}"
     )
+    return f"{line} ({r['error']})" if r.get("error") else line
 
 
 def _rows(seeds: list[int], workers: int, overrides: tuple[str, ...] = ()):
@@ -109,11 +114,17 @@ def bench_autonav(
     summary table; with ``workers > 1`` the fields run on a spawn pool (cycle times are then measured with the cores
     shared, so quote them from a ``workers = 1`` run)."""
     seeds = list(seeds) if seeds else list(range(first_seed, first_seed + runs))
+    from tqdm import tqdm
+
     rows = []
-    print(f"stack: {label}")
-    for r in _rows(seeds, workers, tuple(overrides)):
-        rows.append(r)
-        _print_row(r)
+    print(f"stack: {label}", flush=True)
+    with tqdm(total=len(seeds), desc=f"bench autonav ({label})", unit="field", disable=None, leave=False) as bar:
+        for r in _rows(seeds, workers, tuple(overrides)):
+            rows.append(r)
+            bar.write(_row_line(r))
+            bar.update()
+            if interrupts.was_interrupted(r["reason"]):
+                break  # Ctrl-C / SIGTERM: the summary covers the fields that ran (the CLI exits 130 / 143)
     rows.sort(key=lambda r: r["seed"])
     ms = [r["cycle_ms_median"] for r in rows if r["cycle_ms_median"] is not None]
     result = {
@@ -130,6 +141,7 @@ def bench_autonav(
         and result["collisions"] <= bar.max_collisions
         and (result["cycle_ms_median"] is None or result["cycle_ms_median"] <= bar.max_cycle_ms)
     )
+    ms_text = "-" if result["cycle_ms_median"] is None else f"{result['cycle_ms_median']:.1f}"
     print()
     print(
         "| runs | reached within 1 m | collisions (body, or rock >= 25 cm) | GESTALT cycle ms (median) | acceptance |"
@@ -137,7 +149,7 @@ def bench_autonav(
     print("|---:|---:|---:|---:|---|")
     print(
         f"| {result['runs']} | {result['reached']} ({100 * result['reached'] / max(1, len(rows)):.0f} %) | "
-        f"{result['collisions']} | {result['cycle_ms_median']:.1f} | >= {100 * bar.min_reached_frac:.0f} % reached, "
+        f"{result['collisions']} | {ms_text} | >= {100 * bar.min_reached_frac:.0f} % reached, "
         f"{bar.max_collisions} collisions, <= {bar.max_cycle_ms:.0f} ms |"
     )
     write_json(json_path, result)

@@ -8,11 +8,15 @@ from typing import Annotated
 import typer
 
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported anywhere)
+from rover_sim.cli.export import export_cmd
+from rover_sim.cli.status import finish, guarded
+from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
 
 app = typer.Typer(help="MER-class rover simulator with a MER-style navigation stack.", no_args_is_help=True)
 bench_app = typer.Typer(help="Benchmarks: print a markdown table, optionally write JSON.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
+app.command("view")(view_cmd)
 
 JsonOpt = Annotated[Path | None, typer.Option("--json", help="Write the results as JSON to this path.")]
 _IMPL = "an import path 'pkg.module:Class' or an entry point in 'rover_sim.plugins'"
@@ -21,6 +25,12 @@ StereoOpt = Annotated[
     str | None, typer.Option("--stereo", help=f"Stereo matcher: {_IMPL} (nav.protocols.StereoMatcher).")
 ]
 PlannerOpt = Annotated[str | None, typer.Option("--planner", help=f"Planner: {_IMPL} (nav.protocols.Planner).")]
+JunitOpt = Annotated[
+    Path | None, typer.Option("--junit", help="Write JUnit XML (one test case per scenario/case) to this path.")
+]
+
+
+RENDER_PX = (16, 2048)  # `render --resolution`: MuJoCo's offscreen buffer is allocated at this size
 
 
 def _fail(err: Exception) -> None:
@@ -41,25 +51,25 @@ def check_gl_cmd() -> None:
 
 
 @bench_app.command("slip")
-def bench_slip(json: JsonOpt = None, seed: int = 0, png: str = "runs/bench_slip.png") -> None:
-    """The mobility benchmark: uphill slip vs the MER anchors, held-out checks (speed, parked, cross-slope, locked
-    wheel, ruts), physics speed with the deformable terrain; JSON and a PNG (DP/W vs slip, slip vs slope)."""
-    from rover_sim.bench import mobility as slip
+def bench_slip(json: JsonOpt = None, seed: int = 0, junit: JunitOpt = None) -> None:
+    """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
+    with guarded():
+        from rover_sim.bench import slip
+        from rover_sim.bench.junit_cases import slip_cases
 
-    result = slip.run(str(json) if json else None, seed=seed, png_path=png)
-    if not result["all_pass"]:
-        raise typer.Exit(code=1)
+        result = slip.run(str(json) if json else None, seed=seed)
+    finish(junit, "bench slip", slip_cases(result))
 
 
 @bench_app.command("render")
-def bench_render_cmd(json: JsonOpt = None) -> None:
+def bench_render_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
-    from rover_sim.bench.render import bench_render
-    from rover_sim.mission import acceptance
+    with guarded():
+        from rover_sim.bench.junit_cases import render_cases
+        from rover_sim.bench.render import bench_render
 
-    result = bench_render(str(json) if json else None)
-    if result["stereo_pair_256_shadows_ms"] > acceptance.RENDER.max_pair_256_shadows_ms:
-        raise typer.Exit(code=1)
+        result = bench_render(str(json) if json else None)
+    finish(junit, "bench render", render_cases(result))
 
 
 @bench_app.command("stereo")
@@ -68,17 +78,16 @@ def bench_stereo_cmd(
     stereo: Annotated[
         list[str] | None, typer.Option("--stereo", help=f"Also run this stereo matcher ({_IMPL}); repeatable.")
     ] = None,
+    junit: JunitOpt = None,
 ) -> None:
     """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px);
     any --stereo plugin on the same pairs."""
-    from rover_sim.bench.stereo import bench_stereo
+    with guarded():
+        from rover_sim.bench.junit_cases import stereo_cases
+        from rover_sim.bench.stereo import bench_stereo
 
-    try:
         r = bench_stereo(str(json) if json else None, plugins=stereo or None)
-    except RoverSimError as e:
-        _fail(e)
-    if not r["passed"]:
-        raise typer.Exit(code=1)
+    finish(junit, "bench stereo", stereo_cases(r))
 
 
 @bench_app.command("autonav")
@@ -91,57 +100,65 @@ def bench_autonav_cmd(
     stereo: StereoOpt = None,
     planner: PlannerOpt = None,
     vo: VoOpt = None,
+    junit: JunitOpt = None,
 ) -> None:
     """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away); with --planner,
     --stereo or --vo the same fields run again with those parts swapped in."""
-    from rover_sim.bench.autonav import bench_autonav
-    from rover_sim.mission.scenario import plugin_overrides
-
     path = str(json) if json else None
-    try:
+    with guarded():
+        from rover_sim.bench.autonav import bench_autonav
+        from rover_sim.bench.junit_cases import autonav_cases
+        from rover_sim.mission.scenario import plugin_overrides
+
         r = bench_autonav(path, runs=runs, first_seed=first_seed, workers=workers, seeds=seed)
-        ok = r["passed"]
+        cases = autonav_cases(r)
         overrides = plugin_overrides(vo, stereo, planner)
-        if overrides:
+        if overrides and not any(c.error for c in cases):
             label = ", ".join(x for x in (vo, stereo, planner) if x)
             plugin_path = str(Path(path).with_suffix(".plugins.json")) if path else None
             rp = bench_autonav(plugin_path, runs=runs, first_seed=first_seed, workers=workers, seeds=seed,
                                overrides=tuple(overrides), label=label)  # fmt: skip
-            ok &= rp["passed"]
-    except RoverSimError as e:
-        _fail(e)
-    if not ok:
-        raise typer.Exit(code=1)
+            cases += autonav_cases(rp)
+    finish(junit, "bench autonav", cases)
 
 
 @bench_app.command("dimes")
-def bench_dimes_cmd(json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50) -> None:
+def bench_dimes_cmd(
+    json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50, junit: JunitOpt = None
+) -> None:
     """DIMES: Monte-Carlo descents over winds and terrains; horizontal velocity error and featureless rejection."""
-    from rover_sim.bench.dimes import bench_dimes
+    with guarded():
+        from rover_sim.bench.dimes import bench_dimes
+        from rover_sim.bench.junit_cases import dimes_cases
 
-    if not bench_dimes(str(json) if json else None, runs=runs)["passed"]:
-        raise typer.Exit(code=1)
+        result = bench_dimes(str(json) if json else None, runs=runs)
+    finish(junit, "bench dimes", dimes_cases(result))
 
 
 @bench_app.command("sweep")
-def bench_sweep_cmd(json: JsonOpt = None) -> None:
+def bench_sweep_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Sweep speed: 8 short jobs serially and on a 2-worker pool (acceptance: parallel <= 0.65x serial)."""
-    from rover_sim.bench.sweep import bench_sweep
+    with guarded():
+        from rover_sim.bench.junit_cases import sweep_cases
+        from rover_sim.bench.sweep import bench_sweep
 
-    if not bench_sweep(str(json) if json else None)["passed"]:
-        raise typer.Exit(code=1)
+        result = bench_sweep(str(json) if json else None)
+    finish(junit, "bench sweep", sweep_cases(result))
 
 
 @bench_app.command("rocks")
 def bench_rocks_cmd(
     json: JsonOpt = None,
     seed: Annotated[int | None, typer.Option(help="Replace the scenario seed (another rock field).")] = None,
+    junit: JunitOpt = None,
 ) -> None:
     """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO."""
-    from rover_sim.bench.rocks import bench_rocks, passes
+    with guarded():
+        from rover_sim.bench.junit_cases import rocks_cases
+        from rover_sim.bench.rocks import bench_rocks
 
-    if not passes(bench_rocks(str(json) if json else None, seed=seed)):
-        raise typer.Exit(code=1)
+        result = bench_rocks(str(json) if json else None, seed=seed)
+    finish(junit, "bench rocks", rocks_cases(result))
 
 
 @app.command("render")
@@ -149,16 +166,21 @@ def render_cmd(
     scenario: Annotated[str, typer.Argument(help="Scenario whose terrain, sun and start pose to use.")],
     out: Annotated[Path, typer.Option("--out")] = Path("runs/render"),
     pair: Annotated[str, typer.Option(help="navcam | hazcam_front | hazcam_rear")] = "navcam",
-    resolution: Annotated[int, typer.Option(help="Image side in pixels.")] = 256,
+    resolution: Annotated[int, typer.Option(help=f"Image side in pixels ({RENDER_PX[0]}..{RENDER_PX[1]}).")] = 256,
     seed: Annotated[int | None, typer.Option()] = None,
 ) -> None:
     """Write a stereo pair, its depth and the camera-model JSON at the scenario's start pose."""
     import math
 
-    from rover_sim.bench.render import render_to_dir
+    from rover_sim.bench.render import HAZCAM_PAIRS, render_to_dir
     from rover_sim.mission.scenario import load_scenario
     from rover_sim.sim.world import Sun
 
+    pairs = ("navcam", *HAZCAM_PAIRS)
+    if pair not in pairs:
+        _fail(ValueError(f"--pair {pair!r}: choose from {', '.join(pairs)}"))
+    if not RENDER_PX[0] <= resolution <= RENDER_PX[1]:  # checked first: too large an offscreen buffer kills MuJoCo
+        _fail(ValueError(f"--resolution {resolution}: allowed {RENDER_PX[0]}..{RENDER_PX[1]} pixels"))
     try:
         sc = load_scenario(scenario, seed=seed)
     except RoverSimError as e:
@@ -185,19 +207,20 @@ def bench_vo_cmd(
         list[str] | None, typer.Option("--vo", help=f"Also run this visual odometer ({_IMPL}); repeatable.")
     ] = None,
     case: Annotated[list[str] | None, typer.Option("--case", help="Only these cases (repeatable).")] = None,
+    junit: JunitOpt = None,
 ) -> None:
     """VO cases: MSSTB rock course, 30 m slope, featureless soil, rover shadow; MER VO beside any --vo plugins."""
-    from rover_sim.bench.missions import VO_CASES, all_passed, bench_vo
+    from rover_sim.bench.missions import VO_CASES
 
     for c in case or []:
         if c not in VO_CASES:
             _fail(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
-    try:
+    with guarded():
+        from rover_sim.bench.junit_cases import vo_cases
+        from rover_sim.bench.missions import bench_vo
+
         results = bench_vo(str(json) if json else None, plugins=vo or None, cases=case or None)
-    except RoverSimError as e:
-        _fail(e)
-    if not all_passed(results):
-        raise typer.Exit(code=1)
+    finish(junit, "bench vo", vo_cases(results))
 
 
 @bench_app.command("suite")
@@ -210,27 +233,41 @@ def bench_suite_cmd(
     vo: VoOpt = None,
     stereo: StereoOpt = None,
     planner: PlannerOpt = None,
+    junit: JunitOpt = None,
+    baseline: Annotated[
+        Path | None,
+        typer.Option("--baseline", help="Compare with this baseline file (yours; relative tolerances) instead."),
+    ] = None,
+    tolerance: Annotated[
+        float, typer.Option("--tolerance", min=0.0, max=10.0, help="Relative tolerance for --baseline.")
+    ] = 0.10,
 ) -> None:
     """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline.
 
     With --vo/--stereo/--planner the catalogue runs a second time with those parts swapped in, and both tables
-    print (the plugin stack is judged by each scenario's criteria; the baseline gates the built-in stack)."""
-    from rover_sim.bench.missions import bench_suite
-    from rover_sim.mission.scenario import plugin_overrides
+    print (the plugin stack is judged by each scenario's criteria; the baseline gates the built-in stack).
+    --baseline FILE compares every stack with your own file instead (a metric may get --tolerance worse, relative;
+    FILE: a bench suite --json, or what --update-baseline writes there)."""
+    from rover_sim.resources import source_checkout
 
+    if update_baseline and baseline is None and source_checkout() is None:
+        _fail(ValueError("--update-baseline outside a source checkout needs --baseline PATH (the file to write)"))
     path = str(json) if json else None
-    try:
-        _, ok = bench_suite(path, fast=fast, update_baseline=update_baseline)
+    with guarded():
+        from rover_sim.bench.junit_cases import suite_cases
+        from rover_sim.bench.missions import bench_suite
+        from rover_sim.mission.scenario import plugin_overrides
+
+        kw = {"fast": fast, "baseline_path": baseline, "tolerance": tolerance}
+        rows, _ = bench_suite(path, update_baseline=update_baseline, **kw)
+        cases = suite_cases(rows)
         overrides = plugin_overrides(vo, stereo, planner)
-        if overrides:
+        if overrides and not any(c.error for c in cases):
             label = ", ".join(x for x in (vo, stereo, planner) if x)
             plugin_path = str(Path(path).with_suffix(".plugins.json")) if path else None
-            _, ok_plugin = bench_suite(plugin_path, fast=fast, overrides=overrides, label=label)
-            ok &= ok_plugin
-    except RoverSimError as e:
-        _fail(e)
-    if not ok:
-        raise typer.Exit(code=1)
+            plugin_rows, _ = bench_suite(plugin_path, overrides=overrides, label=label, **kw)
+            cases += suite_cases(plugin_rows, label)
+    finish(junit, "bench suite", cases)
 
 
 SetOpt = Annotated[list[str] | None, typer.Option("--set", help="Override a scenario field: dotted.key=value.")]
@@ -239,7 +276,9 @@ SetOpt = Annotated[list[str] | None, typer.Option("--set", help="Override a scen
 @app.command("run")
 def run_cmd(
     scenario: Annotated[str, typer.Argument(help="Scenario name (scenarios/<name>.toml) or path to a TOML file.")],
-    out: Annotated[Path, typer.Option("--out", help="Output directory.")] = Path("runs/latest"),
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Output directory [default: runs/latest, replaced by each run].")
+    ] = None,
     seed: Annotated[int | None, typer.Option("--seed", help="Override the scenario seed.")] = None,
     set_: SetOpt = None,
     record: Annotated[bool, typer.Option("--record/--no-record", help="Write DIR/recording.rrd.")] = True,
@@ -247,32 +286,72 @@ def run_cmd(
     vo: VoOpt = None,
     stereo: StereoOpt = None,
     planner: PlannerOpt = None,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Clear a non-empty --out directory first (its contents only).")
+    ] = False,
+    junit: JunitOpt = None,
 ) -> None:
-    """Run a mission scenario: writes recording.rrd, metrics.json, trajectories/*.tum, plots/*.png."""
-    from rover_sim.mission.run import run_scenario
-    from rover_sim.mission.scenario import plugin_overrides
+    """Run a mission scenario: writes recording.rrd, metrics.json, trajectories/*.tum, plots/*.png.
 
-    overrides = plugin_overrides(vo, stereo, planner) + list(set_ or [])
-    try:
-        metrics = run_scenario(scenario, out, seed=seed, overrides=overrides, record=record, progress=progress)
-    except RoverSimError as e:
-        _fail(e)
+    Exit status: 0 pass, 1 a criterion failed, 2 bad input, 3 run error, 130 Ctrl-C, 143 SIGTERM."""
+    from rover_sim.cli.outdir import prepare_out_dir
+    from rover_sim.io.junit import scenario_case
+
+    if out is None:
+        out, overwrite = Path("runs/latest"), True
+    with guarded():
+        from rover_sim.mission.run import run_scenario
+        from rover_sim.mission.scenario import load_scenario, plugin_overrides
+
+        overrides = plugin_overrides(vo, stereo, planner) + list(set_ or [])
+        sc = load_scenario(scenario, overrides, seed)  # bad input is reported before --out is touched
+        prepare_out_dir(out, overwrite)
+        metrics = run_scenario(sc, out, record=record, progress=progress)
     colour = typer.colors.GREEN if metrics.passed else typer.colors.RED
     typer.secho(f"{metrics.scenario}: {'PASS' if metrics.passed else 'FAIL'} ({metrics.reason})", fg=colour)
+
+    def pct(v: float | None) -> str:
+        return "-" if v is None else f"{v:.2f} %"
+
     typer.echo(
-        f"distance {metrics.distance_m:.2f} m | DR error {metrics.dr_error_pct:.2f} % | VO error "
-        f"{metrics.vo_error_pct} % | VO convergence {metrics.vo_convergence_pct} % | max slip {metrics.max_slip_pct} %"
+        f"distance {metrics.distance_m:.2f} m | DR error {pct(metrics.dr_error_pct)} | VO error "
+        f"{pct(metrics.vo_error_pct)} | VO convergence {pct(metrics.vo_convergence_pct)} | max slip "
+        f"{pct(metrics.max_slip_pct)}"
     )
     where = f"outputs in {out}/ (plots in {out}/plots/)"
     typer.echo(f"{where}; open the recording with: rerun {out}/recording.rrd" if record else where)
-    if not metrics.passed:
-        raise typer.Exit(code=1)
+    finish(junit, "run", [scenario_case(metrics.deterministic_dict(), "run")])  # status: see rover_sim.cli.status
+
+
+@app.command("scenarios")
+def scenarios_cmd() -> None:
+    """List the scenario catalogue: name, `fast` (in the CI subset) and the first line of the description."""
+    from rover_sim.mission.scenario import catalogue, load_scenario
+
+    names = catalogue()
+    if not names:
+        from rover_sim.resources import scenarios_dir
+
+        _fail(FileNotFoundError(f"no scenario files (*.toml) in {scenarios_dir()}"))
+    width = max((len(n) for n in names), default=0)
+    bad = False
+    for name in names:
+        try:
+            s = load_scenario(name)
+        except RoverSimError as e:
+            typer.echo(f"{name:<{width}}  ?     invalid: {e}")
+            bad = True
+            continue
+        first = next(iter(s.description.strip().splitlines()), "")
+        typer.echo(f"{name:<{width}}  {'fast' if s.fast else '-   '}  {first}")
+    if bad:
+        raise typer.Exit(code=2)
 
 
 @app.command("demo")
 def demo_cmd(out: Annotated[Path, typer.Option("--out")] = Path("runs/demo")) -> None:
-    """The main job: the Wopmay scenario with a rerun recording, metrics and plots."""
-    run_cmd("wopmay", out=out, seed=None, set_=None, record=True, progress=True)
+    """The main job: the Wopmay scenario with a rerun recording, metrics and plots (replaces DIR's contents)."""
+    run_cmd("wopmay", out=out, seed=None, set_=None, record=True, progress=True, overwrite=True)
 
 
 @app.command("sweep")
@@ -351,7 +430,13 @@ def stereo_command(
         _fail(e)
 
 
+app.command("export")(export_cmd)
+
+
 def main() -> None:  # pragma: no cover - console entry point
+    from rover_sim.interrupts import install_sigterm_handler
+
+    install_sigterm_handler()  # SIGTERM stops a run like Ctrl-C (exit 143); commands also install it themselves
     app()
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from rover_sim.mission.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
-from rover_sim.mission.evaluator import Metrics
+from rover_sim.mission.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
 from rover_sim.mission.scenario import KeepOut, PassSpec
 
 TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
@@ -113,14 +113,17 @@ def judge(
         if not ok:
             fails.append(text)
 
+    short = f"not measured: {m.distance_m} m travelled (< {MIN_DISTANCE_FOR_PCT_M} m)"
     if p.max_vo_error_pct is not None:
-        need(
-            m.vo_error_pct is not None and m.vo_error_pct <= p.max_vo_error_pct,
-            f"VO error {m.vo_error_pct} % > {p.max_vo_error_pct} %",
-        )
-    if p.min_dr_error_pct is not None:
+        if m.vo_error_pct is None:
+            fails.append(f"VO error {short}" if m.vo_error_m is not None else "VO error not measured: VO off")
+        else:
+            need(m.vo_error_pct <= p.max_vo_error_pct, f"VO error {m.vo_error_pct} % > {p.max_vo_error_pct} %")
+    if (p.min_dr_error_pct is not None or p.max_dr_error_pct is not None) and m.dr_error_pct is None:
+        fails.append(f"DR error {short}")
+    elif p.min_dr_error_pct is not None:
         need(m.dr_error_pct >= p.min_dr_error_pct, f"DR error {m.dr_error_pct} % < {p.min_dr_error_pct} %")
-    if p.max_dr_error_pct is not None:
+    if p.max_dr_error_pct is not None and m.dr_error_pct is not None:
         need(m.dr_error_pct <= p.max_dr_error_pct, f"DR error {m.dr_error_pct} % > {p.max_dr_error_pct} %")
     if p.min_vo_convergence_pct is not None:
         need(

@@ -22,6 +22,9 @@ from nav.trajectory import Pose, Trajectory, relative_errors
 FALSE_POSITIVE_M = 0.05  # an accepted VO update whose translation is off by more than this is a false positive
 SLIP_WINDOW_M = 0.35  # commanded travel per slip sample when there are no VO steps (MER's VO step)
 MIN_SLIP_TRAVEL_M = 0.05  # steps commanding less travel than this (turns in place) give no slip sample
+# errors as a percentage of distance need a distance: below this path length (a mast-only run, a zero-length drive,
+# a turn in place) the *_error_pct metrics are None (not measured) and only the errors in metres are reported
+MIN_DISTANCE_FOR_PCT_M = 0.1
 
 
 @dataclass
@@ -45,7 +48,7 @@ class Metrics:
     scenario: str
     seed: int
     distance_m: float
-    dr_error_pct: float
+    dr_error_pct: float | None  # None when the path is shorter than MIN_DISTANCE_FOR_PCT_M
     vo_error_pct: float | None
     vo_convergence_pct: float | None
     max_slip_pct: float
@@ -173,7 +176,11 @@ class Evaluator:
     def metrics(self, *, wall_s: float, sim_s: float, halted: str | None, extra: dict, timing: dict) -> Metrics:
         tr = self.trajectories()
         truth = tr["truth"]
-        dist = max(truth.path_length_m(), 1e-9)
+        dist = truth.path_length_m()
+
+        def pct(err: float | None) -> float | None:
+            return round(100 * err / dist, 3) if err is not None and dist >= MIN_DISTANCE_FOR_PCT_M else None
+
         end = truth.positions_xyz[-1]
         dr_err = float(np.linalg.norm(tr["dead_reckoning"].positions_xyz[-1] - end))
         vo_err = float(np.linalg.norm(tr["vo"].positions_xyz[-1] - end)) if "vo" in tr else None
@@ -195,8 +202,8 @@ class Evaluator:
             scenario=self.scenario_name,
             seed=self.seed,
             distance_m=round(dist, 4),
-            dr_error_pct=round(100 * dr_err / dist, 3),
-            vo_error_pct=round(100 * vo_err / dist, 3) if vo_err is not None else None,
+            dr_error_pct=pct(dr_err),
+            vo_error_pct=pct(vo_err),
             vo_convergence_pct=round(conv, 2) if conv is not None else None,
             max_slip_pct=round(100 * float(np.max(true_slips)), 2),
             mean_slip_pct=round(100 * float(np.mean(true_slips)), 2),

@@ -22,6 +22,7 @@ import numpy as np
 
 from nav.geometry import R_to_rpy
 from nav.trajectory import Pose, Trajectory
+from rover_sim import interrupts
 from rover_sim.errors import PhysicsDiverged, PluginError
 from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission import acceptance
@@ -67,16 +68,21 @@ class Mission:
         self.progress = progress
         self.world = World(scenario)
         nav = scenario.nav
-        self.onboard = Onboard(
-            self.world.start_pose(),
-            vo=make_vo(nav.vo),
-            stereo=make_stereo(nav.stereo),
-            planner_factory=lambda: make_planner(nav.planner),
-        )
+        try:
+            self.onboard = Onboard(
+                self.world.start_pose(),
+                vo=make_vo(nav.vo),
+                stereo=make_stereo(nav.stereo),
+                planner_factory=lambda: make_planner(nav.planner),
+            )
+        except BaseException:  # a plugin that does not load, or Ctrl-C: release the renderer's GL context
+            self.world.close()
+            raise
         self.evaluator = Evaluator(scenario.name, scenario.seed, self._last_goal(), has_vo=self.onboard.vo is not None)
         self.events: list[str] = []
         self.halted: Halt | None = None
         self.error: str | None = None
+        self.interrupted: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM (errors.Terminated) stopped the run
         self.step = 0
         self.autonav_stats = None  # set by rover_sim.mission.autonav when the scenario uses autonav
         # public hooks (sinks): exporters, surveys and user code subscribe; none may change the run
@@ -112,9 +118,9 @@ class Mission:
     # ------------------------------------------------------------------ the loop
     def run(self) -> Metrics:
         t0 = time.perf_counter()
-        self.log_static()
-        self.tick(self.sim)
         try:
+            self.log_static()
+            self.tick(self.sim)
             if self.onboard.vo is not None:
                 self.vo_update()  # the first pair initialises VO
             for i, cmd in enumerate(self.sc.commands):
@@ -126,8 +132,9 @@ class Mission:
         except (PhysicsDiverged, PluginError) as e:
             self.error = str(e)
             self.event(str(e), "ERROR")
-        except KeyboardInterrupt:
-            self.error = "interrupted (Ctrl-C)"
+        except KeyboardInterrupt as e:  # Ctrl-C, or SIGTERM as errors.Terminated
+            self.interrupted = e
+            self.error = interrupts.describe(e)
             self.event(self.error, "ERROR")
         finally:
             self.world.sensors.detach()
@@ -277,7 +284,11 @@ class Mission:
             self.rec.log_scalars(
                 t,
                 self.step,
-                {"slip/true": record.true_slip, "slip/vo": record.vo_slip, "vo_inliers": float(res.n_inliers)},
+                {
+                    "slip_pct/true": 100.0 * record.true_slip,
+                    "slip_pct/vo": 100.0 * record.vo_slip,
+                    "vo_inliers": float(res.n_inliers),
+                },
             )
             if res.status != "ok":
                 self.event(f"VO {res.status}: {res.reason}", "WARN")
@@ -368,6 +379,8 @@ class Mission:
     # ------------------------------------------------------------------ evaluation
     def metrics(self, wall_s: float) -> Metrics:
         self._wall_s = wall_s
+        if not self.evaluator.truth:  # stopped before the first tick: the start pose is the whole trajectory
+            self.record_poses()
         extra: dict = {}
         if self.evaluator.keep_out_info:
             extra["keep_out"] = self.evaluator.keep_out_info

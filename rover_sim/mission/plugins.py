@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
+import sys
 from importlib.metadata import entry_points
 from typing import Any
 
@@ -44,6 +46,9 @@ def resolve(spec: str) -> Any:
     """The object an implementation name points at (not yet instantiated)."""
     if ":" in spec:
         module_name, _, attr = spec.partition(":")
+        cwd = os.getcwd()
+        if cwd not in sys.path:  # like `python -m`: modules in the current directory are importable
+            sys.path.append(cwd)
         try:
             module = importlib.import_module(module_name)
         except ImportError as err:

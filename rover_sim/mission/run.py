@@ -9,10 +9,20 @@ from pathlib import Path
 import numpy as np
 
 from nav.trajectory import write_tum
+from rover_sim import interrupts
+from rover_sim.io.blueprint import RunLayout, blueprint_for
 from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission.evaluator import Metrics
 from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.scenario import Scenario
+from rover_sim.mission.scenario import AutonavCmd, Scenario
+
+
+def layout_of(sc: Scenario) -> RunLayout:
+    """What the recording of ``sc`` will hold, for its viewer layout."""
+    return RunLayout(
+        vo_camera=sc.nav.camera if sc.nav.vo.enabled else None,
+        autonav=any(isinstance(c, AutonavCmd) for c in sc.commands),
+    )
 
 
 def save_terrain_npz(terrain, heights_m: np.ndarray, path: Path) -> None:
@@ -71,6 +81,33 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
         )
 
 
+def setup_interrupted(sc: Scenario, exc: KeyboardInterrupt, wall_s: float) -> Metrics:
+    """The metrics of a run stopped before its loop started (nothing measured: ``None``)."""
+    return Metrics(
+        scenario=sc.name,
+        seed=sc.seed,
+        distance_m=0.0,
+        dr_error_pct=None,
+        vo_error_pct=None,
+        vo_convergence_pct=None,
+        max_slip_pct=None,  # type: ignore[arg-type]
+        mean_slip_pct=None,  # type: ignore[arg-type]
+        passed=False,
+        reason=f"run did not complete: {interrupts.describe(exc, 'during setup')}",
+        wall_s=round(wall_s, 2),
+        dr_error_m=None,  # type: ignore[arg-type]
+    )
+
+
+def write_setup_outputs(sc: Scenario, metrics: Metrics, out_dir: Path) -> None:
+    """What a run stopped during setup can write: metrics.json (a stub), timing.json, scenario.json, events.log."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "metrics.json").write_text(json.dumps(metrics.deterministic_dict(), indent=2))
+    (out_dir / "timing.json").write_text(json.dumps({"wall_s": metrics.wall_s}, indent=2))
+    (out_dir / "scenario.json").write_text(json.dumps(sc.resolved_dict(), indent=2))
+    (out_dir / "events.log").write_text(f"[    0.00s] ERROR: {metrics.reason.removeprefix('run did not complete: ')}\n")
+
+
 def run_scenario(
     scenario: str | Path | Scenario,
     out_dir: Path | None,
@@ -78,9 +115,30 @@ def run_scenario(
     overrides: list[str] | None = None,
     record: bool = True,
     progress: bool = False,
+    reraise_interrupt: bool = False,
 ) -> Metrics:
-    """Load, run and write one scenario. Ctrl-C or a physics divergence still leaves a valid recording and
-    partial metrics (``passed`` false, ``reason`` says why)."""
+    """Load, run and write one scenario. Ctrl-C, SIGTERM (see :mod:`rover_sim.interrupts`) or a physics divergence
+    still leaves a valid recording and partial metrics (``passed`` false, ``reason`` says why); so does an
+    interrupt while the world is being built ("interrupted during setup"). With ``reraise_interrupt`` the
+    interrupt is raised again once the outputs are written (a benchmark stops instead of going on)."""
+    import time
+
+    with interrupts.sigterm_raises():
+        return _run(scenario, out_dir, seed, overrides, record, progress, reraise_interrupt, time.perf_counter())
+
+
+def _run(
+    scenario: str | Path | Scenario,
+    out_dir: Path | None,
+    seed: int | None,
+    overrides: list[str] | None,
+    record: bool,
+    progress: bool,
+    reraise_interrupt: bool,
+    t0: float,
+) -> Metrics:
+    import time
+
     from rover_sim.io.recording import RerunRecorder
     from rover_sim.mission.scenario import load_scenario
 
@@ -89,7 +147,9 @@ def run_scenario(
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
     rec: Recorder = (
-        RerunRecorder(out_dir / "recording.rrd", recording_name=sc.name) if (record and out_dir) else NullRecorder()
+        RerunRecorder(out_dir / "recording.rrd", recording_name=sc.name, blueprint=blueprint_for(layout_of(sc)))
+        if (record and out_dir)
+        else NullRecorder()
     )
     bar = None
     if progress:
@@ -104,13 +164,24 @@ def run_scenario(
             bar.update(t_s - bar.n)
 
     try:
-        mission = Mission(sc, rec, on_progress)
+        try:
+            mission = Mission(sc, rec, on_progress)
+        except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM while the world was being built
+            metrics = setup_interrupted(sc, e, time.perf_counter() - t0)
+            rec.log_event(0.0, 0, metrics.reason, "ERROR")
+            if out_dir is not None:
+                write_setup_outputs(sc, metrics, out_dir)
+            if reraise_interrupt:
+                raise
+            return metrics
         try:
             metrics = mission.run()
         finally:
             mission.close()
         if out_dir is not None:
             write_outputs(mission, metrics, out_dir)
+        if reraise_interrupt and mission.interrupted is not None:
+            raise mission.interrupted
     finally:
         if bar is not None:
             bar.close()

@@ -255,19 +255,37 @@ class Scenario(_Spec):
         return json.loads(self.model_dump_json(by_alias=True))
 
 
+def _list_index(node: list, key: str, dotted: str, where: str) -> int:
+    """``key`` as an index into ``node`` (the list at ``where``), or a ConfigError naming the list's length."""
+    try:
+        i = int(key)
+    except ValueError:
+        problem = f"'{where}' is a list: '{key}' is not an index (0..{len(node) - 1})"
+        raise ConfigError("--set", dotted, problem) from None
+    if not 0 <= i < len(node):
+        n = len(node)
+        raise ConfigError(
+            "--set", dotted, f"index {i} out of range: '{where}' has {n} item{'s' if n != 1 else ''} (0..{n - 1})"
+        )
+    return i
+
+
 def _set_dotted(tree: dict, dotted: str, value: Any) -> None:
     keys = dotted.split(".")
-    node = tree
-    for k in keys[:-1]:
+    if not all(keys):
+        raise ConfigError("--set", dotted, "empty key (expected dotted.key=value)")
+    node: Any = tree
+    for depth, k in enumerate(keys[:-1]):
+        where = ".".join(keys[:depth]) or "(top level)"
         if isinstance(node, list):
-            node = node[int(k)]
-            continue
-        node = node.setdefault(k, {})
+            node = node[_list_index(node, k, dotted, where)]
+        else:
+            node = node.setdefault(k, {})
         if not isinstance(node, dict | list):
             raise ConfigError("--set", dotted, f"'{k}' is a value, not a table")
     last = keys[-1]
     if isinstance(node, list):
-        node[int(last)] = value
+        node[_list_index(node, last, dotted, ".".join(keys[:-1]))] = value
     else:
         node[last] = value
 

@@ -283,27 +283,32 @@ def _record(jobs_dir: Path, job: Job, result: JobResult) -> None:
 
 def _run_in_process(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn) -> Iterator[tuple[Job, JobResult]]:
     """One job after another in this process. The mission loop turns Ctrl-C into a partial result; here Ctrl-C
-    must stop the sweep instead and leave that job to be run again, so a SIGINT handler notes it first."""
+    must stop the sweep instead and leave that job to be run again, so a SIGINT/SIGTERM handler notes it first."""
     import signal
     import threading
 
-    interrupted: list[bool] = []
+    from rover_sim.errors import Terminated
 
-    def on_sigint(signum, frame) -> None:
-        interrupted.append(True)
-        raise KeyboardInterrupt
+    interrupted: list[type[KeyboardInterrupt]] = []
+
+    def on_signal(signum, frame) -> None:  # SIGTERM (errors.Terminated) is handled like Ctrl-C
+        interrupted.append(Terminated if signum == signal.SIGTERM else KeyboardInterrupt)
+        raise interrupted[-1]
 
     in_main = threading.current_thread() is threading.main_thread()
     for job in jobs:
-        previous = signal.signal(signal.SIGINT, on_sigint) if in_main else None
+        previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)} if in_main else {}
         try:
             result = job_fn(job, jobs_dir)
+        except KeyboardInterrupt:
+            (Path(jobs_dir) / job.job_id / "metrics.json").unlink(missing_ok=True)
+            raise
         finally:
-            if in_main:
-                signal.signal(signal.SIGINT, previous)
+            for s, handler in previous.items():
+                signal.signal(s, handler)
         if interrupted:
             (Path(jobs_dir) / job.job_id / "metrics.json").unlink(missing_ok=True)
-            raise KeyboardInterrupt
+            raise interrupted[-1]
         yield job, result
 
 

@@ -23,7 +23,7 @@ class _Point:
     slope_deg: float
     soil: str
     max_slip_pct: float
-    dr_error_pct: float
+    dr_error_pct: float | None
     vo_error_pct: float | None
 
 
@@ -38,7 +38,7 @@ def _points(jobs: Sequence[Job], results: Sequence[JobResult]) -> list[_Point]:
                     float(terrain.get("slope", {}).get("slope_deg", 0.0)),
                     str(terrain.get("material", {}).get("kind", "?")),
                     float(res.metrics["max_slip_pct"]),
-                    float(res.metrics["dr_error_pct"]),
+                    res.metrics.get("dr_error_pct"),
                     res.metrics.get("vo_error_pct"),
                 )
             )

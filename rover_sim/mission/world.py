@@ -67,6 +67,8 @@ class World:
         )
         self._rigs: dict[str, StereoRig] = {}
         self.calibrate(scenario.nav.camera)
+        # the operator-given start of the drive (previous localisation and sun finding), fixed once settled
+        self.operator_start_pose = Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz())
 
     # ------------------------------------------------------------------ commands to the hardware
     def point_mast(self, pan_deg: float, elevation_deg: float) -> None:
@@ -102,6 +104,7 @@ class World:
             images=MappingProxyType(images),
             mast_pan_deg=self.mast_pan_deg,
             mast_elevation_deg=self.mast_elevation_deg,
+            start_pose=self.operator_start_pose,
         )
 
     # ------------------------------------------------------------------ ground truth (never onboard)
@@ -110,7 +113,7 @@ class World:
 
     def start_pose(self) -> Pose:
         """The operator-given start pose of the drive (from the previous localisation and sun finding)."""
-        return self.truth_pose()
+        return self.operator_start_pose
 
     def close(self) -> None:
         self.sensors.detach()

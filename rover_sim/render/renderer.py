@@ -420,6 +420,10 @@ class StereoRenderer:
         self.last_drawn: dict = {}  # what the last render drew (tiles, rocks, tile levels): diagnostics
 
     # -- lifecycle
+    def reseed_noise(self, seed: int | None) -> None:
+        """Restart the image-noise generator from ``seed`` (None: noise off for a renderer configured without)."""
+        self._rng = np.random.default_rng(seed) if seed is not None and self.config.noise else None
+
     def close(self) -> None:
         for r in self._renderers.values():
             r.close()

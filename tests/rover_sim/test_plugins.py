@@ -119,3 +119,45 @@ def test_bad_parameter_names_the_field_and_the_range():
         load_scenario("wopmay", ["nav.vo.window_px=4"])
     with pytest.raises(ConfigError, match="nav.vo.params.bogus"):
         load_scenario("wopmay", ["nav.vo.bogus=1"])
+
+
+@pytest.mark.parametrize("case", ["short", pytest.param("msstb", marks=pytest.mark.slow)])
+def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsys, case):
+    """`rover-sim bench vo --vo examples.opencv_vo:OpenCvStereoVO` on one case: both rows, plugin JSON keys.
+    The fast form runs a short sandy-slope case (the tiny scenario, 1.2 m with 4 VO steps); `-m slow` runs MSSTB."""
+    import json
+    import tomllib  # noqa: F401 - the scenario file below is TOML
+    from pathlib import Path
+
+    from rover_sim.bench.missions import VO_CASES, bench_vo
+
+    monkeypatch.chdir(Path(__file__).resolve().parents[2])  # the example lives in the repository's examples/
+    scenarios = dict(VO_CASES)
+    if case == "short":
+        short = dict(TINY, commands=[{"type": "drive", "distance_m": 1.2}], name="tiny_vo_case")
+        scenarios = {"short": scenario_from_dict(short)}
+    out = tmp_path / "vo.json"
+    plugin = "examples.opencv_vo:OpenCvStereoVO"
+    results = bench_vo(str(out), out_root=tmp_path, plugins=[plugin], cases=[case], case_scenarios=scenarios)
+    table = capsys.readouterr().out
+    assert f"| MER VO (builtin) | {case} |" in table and f"| {plugin} | {case} |" in table
+    saved = json.loads(out.read_text())
+    assert set(saved["plugins"][plugin][case]) == set(saved[case])
+    mer, ours = results[case], results["plugins"][plugin][case]
+    assert mer["passed"] and mer["vo_convergence_pct"] == 100.0
+    # the example VO really ran in the loop (its steps were judged), and did better than dead reckoning
+    assert ours["vo_convergence_pct"] is not None and ours["vo_convergence_pct"] > 50.0
+    assert ours["vo_error_pct"] < ours["dr_error_pct"]
+
+
+def test_installed_packages_register_plugins_by_entry_point(user_module, monkeypatch):
+    from importlib.metadata import EntryPoint
+
+    from rover_sim.mission import plugins
+
+    ep = EntryPoint(name="refusing_vo", value=f"{user_module}:RefusingVO", group=plugins.ENTRY_POINT_GROUP)
+    monkeypatch.setattr(plugins, "entry_points", lambda group: [ep] if group == plugins.ENTRY_POINT_GROUP else [])
+    spec = load_scenario("wopmay").nav.vo.model_copy(update={"impl": "refusing_vo"})
+    vo = make_vo(spec)
+    assert type(vo.impl).__name__ == "RefusingVO"
+

@@ -65,7 +65,10 @@ def test_outputs_written(tiny_run):
     assert m.passed, m.reason
     truth = read_tum(out / "trajectories" / "truth.tum")
     vo = read_tum(out / "trajectories" / "vo.tum")
-    assert len(truth) == len(vo) > 10
+    dr = read_tum(out / "trajectories" / "dead_reckoning.tum")
+    assert len(truth) > 10 and len(vo) > 10
+    for traj in (truth, vo, dr):
+        assert np.all(np.diff(traj.t_s) > 0)  # strictly increasing timestamps
     assert np.linalg.norm(vo.positions_xyz[-1] - truth.positions_xyz[-1]) < 0.02
     for p in ("error_vs_distance.png", "paths.png", "slip.png"):
         assert (out / "plots" / p).stat().st_size > 1000

@@ -1,0 +1,1 @@
+"""Examples of user-supplied parts for the onboard stack (see examples/README.md)."""
