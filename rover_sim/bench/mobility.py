@@ -1,7 +1,10 @@
-"""Mobility checks beside the slip curve (`rover-sim bench slip`): held-out tests of the wheel-soil law.
+"""`rover-sim bench slip --soil-model wong_reece`: the mobility benchmark of the EXPERIMENTAL Wong–Reece law.
 
-All on uniform slopes at the scenarios' 0.04 m cells with the deformable terrain on:
+The default ``bench slip`` (rover_sim/bench/slip.py) measures the default Bekker law and is unchanged; this module
+runs only on request, every rover with ``soil_model="wong_reece"``. All on uniform slopes at the scenarios' 0.04 m
+cells with the deformable terrain on (except the parked and speed rows, which say so):
 
+* the uphill slip table (as in bench slip) plus a 1 deg sweep 10-32 deg and the 1 vs 5 cm/s speed effect;
 * cross-slope: the rover heads along the contour (perpendicular to the gradient) for 3 m; downslope drift per
   metre of made-good travel;
 * locked wheel: right-front wheel locked (Spirit from Sol 125), 2 m on flat sand; its mean sinkage over the last
@@ -10,31 +13,109 @@ All on uniform slopes at the scenarios' 0.04 m cells with the deformable terrain
   against the law's mean sinkage; then the rover is put back and drives the same ruts again: the second pass's
   new sinkage (below the rut) against the first pass's (below the surface it met);
 * the single-wheel sinkage ratio at slip 0.6 (same load), from the law.
+
+The law is experimental: it misses several of issue #13's acceptance items (``EXPERIMENTAL_NOTE``, printed first).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from rover_sim.bench import write_json
-from rover_sim.bench.slip import (
-    CELL_M,
-    SLOPES_DEG,
-    START_X_M,
-    anchor,
-    measure_slip,
-    parked_drift_m,
-    passes,
-    physics_speed,
-    slope_terrain,
-)
-from rover_sim.sim.drive import MAX_WHEEL_SPEED_M_S, Straight, execute
+from rover_sim.bench.slip import SLOPES_DEG, START_X_M, SlipRow, anchor, passes
+from rover_sim.sim.drive import MAX_WHEEL_SPEED_M_S, TICK_S, Straight, execute
 from rover_sim.sim.physics import RoverSim
-from rover_sim.sim.terramechanics import SAND, WheelParams, WheelSoilLaw
+from rover_sim.sim.terramechanics_wr import SAND, WheelParams, WheelSoilLaw
+from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
+
+CELL_M = 0.04  # the scenarios' cell size
+SOIL_MODEL = "wong_reece"
+EXPERIMENTAL_NOTE = (
+    "EXPERIMENTAL wheel-soil law (soil_model = wong_reece, opt-in; the default is bekker). Known misses of issue #13's"
+    " acceptance: 1 deg sweep step > 8 pp, speed effect > 3 pp at 15 deg, locked-wheel sinkage ratio < 2,"
+    " real-time factor with deformation below its bar; columbia_hills_drag fails its criteria with it;"
+    " wheel geometry (item 4) and purgatory_ripple (item 5) not built; render tiles do not show ruts."
+)
+
+
+def slope_terrain(material: str, slope_deg: float, seed: int = 0, size_m: tuple[float, float] = (16.0, 8.0)):
+    """A uniform planar slope rising toward +x, at the scenarios' cells."""
+    recipe = TerrainRecipe(
+        size_m=size_m,
+        cell_size_m=CELL_M,
+        slope=SlopeSpec(slope_deg=slope_deg, azimuth_deg=0.0),
+        roughness=RoughnessSpec(rms_m=0.0),
+        rocks=RockSpec(cover_fraction=0.0),
+        material=MaterialSpec(kind=material),
+    )
+    return synthesize(recipe, seed)
+
+
+def wr_sim(terrain, deform: bool = True, soil_law: bool = True) -> RoverSim:
+    sim = RoverSim(terrain, soil_law=soil_law, soil_model=SOIL_MODEL)
+    if deform:
+        sim.enable_deformation()
+    return sim
+
+
+def measure_slip(
+    material: str,
+    slope_deg: float,
+    drive_m: float = 3.0,
+    warmup_m: float = 0.5,
+    seed: int = 0,
+    speed_m_s: float = MAX_WHEEL_SPEED_M_S,
+    deform: bool = True,
+) -> SlipRow:
+    """Uphill slip after ``warmup_m`` of commanded travel (the protocol of bench slip, this law, 0.04 m cells)."""
+    sim = wr_sim(slope_terrain(material, slope_deg, seed), deform)
+    sim.place(START_X_M, 0.0, 0.0)
+    r = sim.law.radius_m
+    mark: dict[str, np.ndarray] = {}
+    a_start = sim.wheel_angles_rad().mean()
+
+    def on_tick(s: RoverSim) -> None:
+        if "p0" not in mark and (s.wheel_angles_rad().mean() - a_start) * r >= warmup_m:
+            mark["p0"], mark["a0"], mark["x_axis"] = s.position_m(), s.wheel_angles_rad().mean(), s.rotation()[:, 0]
+        return None
+
+    execute(sim, Straight(drive_m), speed_m_s=speed_m_s, on_tick=on_tick)
+    commanded = (sim.wheel_angles_rad().mean() - mark["a0"]) * r
+    made_good = float(np.dot(sim.position_m() - mark["p0"], mark["x_axis"]))
+    return SlipRow(material, slope_deg, 1.0 - made_good / commanded, float(commanded), made_good)
+
+
+def parked_drift_m(slope_deg: float = 30.0, hold_s: float = 60.0, seed: int = 0, material: str = "bedrock") -> float:
+    """Displacement of a rover parked (wheels held) on a slope of ``material`` over ``hold_s`` (no deformation)."""
+    sim = wr_sim(slope_terrain(material, slope_deg, seed), deform=False)
+    sim.place(0.0, 0.0, 0.0, settle_s=2.0)
+    p0 = sim.position_m()
+    sim.step_for(hold_s)
+    return float(np.linalg.norm(sim.position_m() - p0))
+
+
+def physics_speed(sim_s: float = 20.0, seed: int = 0) -> dict[str, float]:
+    """Real-time factors driving on flat sand at the scenarios' cells: the law alone, the law with the deformable
+    terrain, and bare MuJoCo (law off) of the same model and timestep, all in the same run."""
+    terrain = slope_terrain("sand", 0.0, seed)
+    rates = {}
+    for mode in ("law", "deform", "bare"):
+        sim = wr_sim(terrain, deform=mode == "deform", soil_law=mode != "bare")
+        sim.place(START_X_M, 0.0, 0.0, settle_s=0.5)
+        n = int(sim_s / sim.timestep_s)
+        wheel_rate = np.full(6, MAX_WHEEL_SPEED_M_S / sim.law.radius_m)
+        chunk = int(round(TICK_S / sim.timestep_s))
+        t0 = time.perf_counter()
+        for _ in range(n // chunk):
+            sim.step(wheel_rate, chunk)
+        rates[mode] = (n // chunk) * chunk * sim.timestep_s / (time.perf_counter() - t0)
+    return rates
+
 
 W_N = 108.0  # one sixth of MER's weight on Mars
 
@@ -46,8 +127,7 @@ def sinkage_ratio_i06() -> float:
 
 def cross_slope_drift_m_per_m(material: str, slope_deg: float, drive_m: float = 3.0, seed: int = 0) -> float:
     """Downslope drift per metre driven along the contour (the slope rises toward +x; the rover heads +y)."""
-    sim = RoverSim(slope_terrain(material, slope_deg, seed))
-    sim.enable_deformation()
+    sim = wr_sim(slope_terrain(material, slope_deg, seed))
     sim.place(0.0, -2.0, math.pi / 2)
     p0 = sim.position_m()
     execute(sim, Straight(drive_m), speed_m_s=MAX_WHEEL_SPEED_M_S)
@@ -57,8 +137,7 @@ def cross_slope_drift_m_per_m(material: str, slope_deg: float, drive_m: float = 
 
 def locked_wheel_sinkage_ratio(drive_m: float = 2.0, seed: int = 0) -> float:
     """Sinkage of the locked right-front wheel over the last metre / the mean of the free wheels'."""
-    sim = RoverSim(slope_terrain("sand", 0.0, seed))
-    sim.enable_deformation()
+    sim = wr_sim(slope_terrain("sand", 0.0, seed))
     sim.lock_wheels(["rf"])
     sim.place(START_X_M, 0.0, 0.0)
     x0 = sim.position_m()[0]
@@ -78,7 +157,7 @@ def locked_wheel_sinkage_ratio(drive_m: float = 2.0, seed: int = 0) -> float:
 def rut_checks(drive_m: float = 3.0, seed: int = 0) -> dict[str, float]:
     """rut_depth_ratio, second_pass_sinkage_ratio, bedrock_cells_changed (on a half-bedrock strip) of 3 m drives."""
     terrain = slope_terrain("sand", 0.0, seed)
-    sim = RoverSim(terrain)
+    sim = wr_sim(terrain)
     deform = sim.enable_deformation()
     sim.place(START_X_M, 0.0, 0.0)
     before = deform.heights_m()
@@ -117,7 +196,7 @@ def rut_checks(drive_m: float = 3.0, seed: int = 0) -> dict[str, float]:
 
 def bedrock_unchanged(drive_m: float = 2.0, seed: int = 0) -> bool:
     """A drive on bedrock leaves the heightfield byte-identical."""
-    sim = RoverSim(slope_terrain("bedrock", 0.0, seed))
+    sim = wr_sim(slope_terrain("bedrock", 0.0, seed))
     deform = sim.enable_deformation()
     sim.place(START_X_M, 0.0, 0.0)
     before = deform.heights_m()
@@ -178,7 +257,8 @@ def _fine_sweep(seed: int) -> dict[float, float]:
 
 
 def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "runs/bench_slip.png") -> dict:
-    """`rover-sim bench slip`: the slip table, the held-out mobility checks, speed; JSON and PNG."""
+    """`rover-sim bench slip --soil-model wong_reece`: the slip table, the held-out mobility checks, speed."""
+    print(f"> {EXPERIMENTAL_NOTE}\n", flush=True)
     rows = [measure_slip(m, a, seed=seed) for m in ("sand", "bedrock") for a in SLOPES_DEG]
     fine = _fine_sweep(seed)
     steps = [abs(fine[a + 1] - fine[a]) for a in np.arange(10.0, 25.0)]
@@ -264,6 +344,8 @@ def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "run
     for name, val, acc, ok in checks:
         print(f"| {name} | {val} | {acc} | {'yes' if ok else 'NO'} |")
     result = {
+        "soil_model": SOIL_MODEL,
+        "experimental": True,
         "slip": [{"material": r.material, "slope_deg": r.slope_deg, "slip": r.slip} for r in rows],
         "slip_fine_sand": {f"{a:.0f}": s for a, s in fine.items()},
         "realtime_factor": rtf,
@@ -284,6 +366,7 @@ def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "run
         "deformation_realtime_factor": rtf_def,
         "deformation_bare_ratio": rtf_def / rtf_bare,
         "ruts": ruts,
+        "checks": [{"name": n, "measured": v, "acceptance": a, "ok": bool(ok)} for n, v, a, ok in checks],
         "all_pass": all(c[3] for c in checks) and all(passes(r) for r in rows),
         "rows": [asdict(r) for r in rows],
     }

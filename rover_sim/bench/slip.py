@@ -11,17 +11,17 @@ wheel-soil law versus bare MuJoCo stepping of the same model and timestep (the l
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from rover_sim.bench import write_json
 from rover_sim.sim.drive import MAX_WHEEL_SPEED_M_S, TICK_S, Straight, execute
 from rover_sim.sim.physics import RoverSim
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
 
 SLOPES_DEG = (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0)
 START_X_M = -5.0
-CELL_M = 0.04  # the scenarios' cell size
 
 
 @dataclass(frozen=True)
@@ -33,17 +33,11 @@ class SlipRow:
     made_good_m: float
 
 
-def slope_terrain(
-    material: str,
-    slope_deg: float,
-    seed: int = 0,
-    size_m: tuple[float, float] = (16.0, 8.0),
-    cell_size_m: float = CELL_M,
-):
+def slope_terrain(material: str, slope_deg: float, seed: int = 0, size_m: tuple[float, float] = (16.0, 8.0)):
     """A uniform planar slope rising toward +x."""
     recipe = TerrainRecipe(
         size_m=size_m,
-        cell_size_m=cell_size_m,
+        cell_size_m=0.1,
         slope=SlopeSpec(slope_deg=slope_deg, azimuth_deg=0.0),
         roughness=RoughnessSpec(rms_m=0.0),
         rocks=RockSpec(cover_fraction=0.0),
@@ -53,17 +47,9 @@ def slope_terrain(
 
 
 def measure_slip(
-    material: str,
-    slope_deg: float,
-    drive_m: float = 3.0,
-    warmup_m: float = 0.5,
-    seed: int = 0,
-    speed_m_s: float = MAX_WHEEL_SPEED_M_S,
-    deform: bool = True,
+    material: str, slope_deg: float, drive_m: float = 3.0, warmup_m: float = 0.5, seed: int = 0
 ) -> SlipRow:
     sim = RoverSim(slope_terrain(material, slope_deg, seed))
-    if deform:
-        sim.enable_deformation()
     sim.place(START_X_M, 0.0, 0.0)
     r = sim.law.radius_m
     mark: dict[str, np.ndarray] = {}
@@ -74,30 +60,27 @@ def measure_slip(
             mark["p0"], mark["a0"], mark["x_axis"] = s.position_m(), s.wheel_angles_rad().mean(), s.rotation()[:, 0]
         return None
 
-    execute(sim, Straight(drive_m), speed_m_s=speed_m_s, on_tick=on_tick)
+    execute(sim, Straight(drive_m), speed_m_s=MAX_WHEEL_SPEED_M_S, on_tick=on_tick)
     commanded = (sim.wheel_angles_rad().mean() - mark["a0"]) * r
     made_good = float(np.dot(sim.position_m() - mark["p0"], mark["x_axis"]))
     return SlipRow(material, slope_deg, 1.0 - made_good / commanded, float(commanded), made_good)
 
 
-def parked_drift_m(slope_deg: float = 30.0, hold_s: float = 60.0, seed: int = 0, material: str = "bedrock") -> float:
-    """Displacement of a rover parked (wheels held) on a slope of ``material`` over ``hold_s``."""
-    sim = RoverSim(slope_terrain(material, slope_deg, seed))
+def parked_drift_m(slope_deg: float = 30.0, hold_s: float = 60.0, seed: int = 0) -> float:
+    """Displacement of a rover parked (wheels held) on a bedrock slope over ``hold_s``."""
+    sim = RoverSim(slope_terrain("bedrock", slope_deg, seed))
     sim.place(0.0, 0.0, 0.0, settle_s=2.0)
     p0 = sim.position_m()
     sim.step_for(hold_s)
     return float(np.linalg.norm(sim.position_m() - p0))
 
 
-def physics_speed(sim_s: float = 20.0, seed: int = 0) -> dict[str, float]:
-    """Real-time factors driving on flat sand at the scenarios' cells: the law alone, the law with the deformable
-    terrain, and bare MuJoCo (law off) of the same model and timestep, all in the same run."""
+def physics_speed(sim_s: float = 20.0, seed: int = 0) -> tuple[float, float, float]:
+    """(real-time factor with the law, bare-MuJoCo real-time factor, ratio) driving on flat sand."""
     terrain = slope_terrain("sand", 0.0, seed)
     rates = {}
-    for mode in ("law", "deform", "bare"):
-        sim = RoverSim(terrain, soil_law=mode != "bare")
-        if mode == "deform":
-            sim.enable_deformation()
+    for law in (True, False):
+        sim = RoverSim(terrain, soil_law=law)
         sim.place(START_X_M, 0.0, 0.0, settle_s=0.5)
         n = int(sim_s / sim.timestep_s)
         wheel_rate = np.full(6, MAX_WHEEL_SPEED_M_S / sim.law.radius_m)
@@ -105,8 +88,8 @@ def physics_speed(sim_s: float = 20.0, seed: int = 0) -> dict[str, float]:
         t0 = time.perf_counter()
         for _ in range(n // chunk):
             sim.step(wheel_rate, chunk)
-        rates[mode] = (n // chunk) * chunk * sim.timestep_s / (time.perf_counter() - t0)
-    return rates
+        rates[law] = (n // chunk) * chunk * sim.timestep_s / (time.perf_counter() - t0)
+    return rates[True], rates[False], rates[True] / rates[False]
 
 
 def anchor(material: str, slope_deg: float) -> str:
@@ -129,3 +112,40 @@ def passes(row: SlipRow) -> bool:
     if row.material == "sand":
         return (a > 5 or s <= 0.10) and (not 17 <= a <= 20 or 0.40 <= s <= 0.65) and (a < 30 or s >= 0.90)
     return a > 20 or s <= 0.05
+
+
+def run(json_path: str | None = None, slopes_deg: tuple[float, ...] = SLOPES_DEG, seed: int = 0) -> dict:
+    rows = [measure_slip(m, a, seed=seed) for m in ("sand", "bedrock") for a in slopes_deg]
+    drift = parked_drift_m(seed=seed)
+    rtf, rtf_bare, ratio = physics_speed(seed=seed)
+    sand = [r.slip for r in rows if r.material == "sand"]
+    monotonic = bool(np.all(np.diff(sand) > 0))
+
+    print("| material | slope (deg) | slip (%) | published anchor / acceptance | ok |")
+    print("|---|---:|---:|---|:-:|")
+    for r in rows:
+        print(
+            f"| {r.material} | {r.slope_deg:.0f} | {100 * r.slip:.1f} | {anchor(r.material, r.slope_deg)} "
+            f"| {'yes' if passes(r) else 'NO'} |"
+        )
+    print()
+    print("| check | measured | acceptance |")
+    print("|---|---:|---|")
+    print(f"| sand slip monotonic in slope | {'yes' if monotonic else 'no'} | yes |")
+    print(f"| parked 30 deg bedrock, 60 s drift | {100 * drift:.2f} cm | < 1 cm |")
+    print(f"| real-time factor with wheel-soil law | {rtf:.0f}x | >= 20x |")
+    print(f"| 30 m drive at 5 cm/s (600 s simulated) | {600 / rtf:.1f} s wall | <= 30 s |")
+    print(f"| bare MuJoCo real-time factor (law off) | {rtf_bare:.0f}x | - |")
+    print(f"| ratio to bare MuJoCo step rate | {ratio:.2f} | >= 0.3 |")
+    result = {
+        "slip": [{"material": r.material, "slope_deg": r.slope_deg, "slip": r.slip} for r in rows],
+        "realtime_factor": rtf,
+        "bare_mujoco_ratio": ratio,
+        "parked_30deg_bedrock_drift_m": drift,
+        "bare_realtime_factor": rtf_bare,
+        "sand_monotonic": monotonic,
+        "all_pass": monotonic and drift < 0.01 and rtf >= 20 and ratio >= 0.3 and all(passes(r) for r in rows),
+        "rows": [asdict(r) for r in rows],
+    }
+    write_json(json_path, result)
+    return result

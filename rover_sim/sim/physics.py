@@ -11,12 +11,14 @@ import numpy as np
 
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
-from rover_sim.sim.deform import DeformableTerrain
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
 from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
 if TYPE_CHECKING:
+    from rover_sim.sim.deform import DeformableTerrain
     from terrains import Terrain
+
+SOIL_MODELS = ("bekker", "wong_reece")  # [physics] soil_model: the default law, the experimental opt-in one
 
 WHEEL_RADIUS_M = 0.125
 WHEEL_WIDTH_M = 0.16
@@ -64,6 +66,9 @@ class RoverSim:
     """A MER rover on a terrain: physics, the wheel–soil law and named accessors.
 
     ``soil_law=False`` gives the bare MuJoCo model (frictionless wheels, nothing applied) for speed comparisons.
+    ``soil_model`` picks the wheel-soil law: ``"bekker"`` (default, :mod:`rover_sim.sim.terramechanics`) or the
+    experimental ``"wong_reece"`` (:mod:`rover_sim.sim.terramechanics_wr`), the only one that supports
+    :meth:`enable_deformation`.
     """
 
     def __init__(
@@ -73,7 +78,10 @@ class RoverSim:
         soil_law: bool = True,
         texture_rgb: np.ndarray | None = None,
         timestep_s: float | None = None,
+        soil_model: str = "bekker",
     ) -> None:
+        if soil_model not in SOIL_MODELS:
+            raise ValueError(f"soil_model must be one of {', '.join(SOIL_MODELS)}, not {soil_model!r}")
         self.terrain = terrain
         self.sun = sun or Sun()
         self.spec = build_spec(terrain, self.sun, texture_rgb=texture_rgb)
@@ -82,7 +90,15 @@ class RoverSim:
         self.model = self.spec.compile()
         self.data = mujoco.MjData(self.model)
         self.soil_law_enabled = soil_law
-        self.law = WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
+        self.soil_model = soil_model
+        self.deform: DeformableTerrain | None = None  # attached by enable_deformation() (wong_reece only)
+        if soil_model == "wong_reece":
+            from rover_sim.sim import terramechanics_wr
+
+            self.law = terramechanics_wr.WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
+            self._apply_soil_law = self._apply_soil_law_wr  # the default law's path stays untouched
+        else:
+            self.law = WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
         m = self.model
         self._wheel_body = np.array([m.body(f"wheel_{w}").id for w in WHEELS])
         self._wheel_qadr = np.array([m.jnt_qposadr[m.joint(f"wheel_{w}").id] for w in WHEELS])
@@ -122,7 +138,6 @@ class RoverSim:
             m.geom(f"{ROCK_GEOM_PREFIX}{i:04d}").id: i for i in range(len(terrain.rocks))
         }  # rock geom id -> index into terrain.rocks
         self._wheel_free = np.ones(6)  # 0 for a locked (held, dragged) wheel
-        self.deform = None  # DeformableTerrain, attached by enable_deformation()
         self._substep_hook: Callable[[RoverSim], None] | None = None
         self._substep_every = 1
         self._substep_count = 0
@@ -130,8 +145,13 @@ class RoverSim:
 
     # ------------------------------------------------------------------ setup
     def enable_deformation(self) -> DeformableTerrain:
-        """Make the heightfield deformable under the wheels (ruts, berms, multipass; see sim/deform.py)."""
+        """Make the heightfield deformable under the wheels (ruts, berms, multipass; see sim/deform.py).
+        Experimental; only with ``soil_model="wong_reece"`` (it reads that law's sinkage, axles and presink)."""
+        if self.soil_model != "wong_reece":
+            raise ValueError(f"deformable terrain needs soil_model 'wong_reece', not {self.soil_model!r}")
         if self.deform is None:
+            from rover_sim.sim.deform import DeformableTerrain
+
             self.deform = DeformableTerrain(self, tuple(m.deformable for m in self.law.materials))
         return self.deform
 
@@ -223,6 +243,20 @@ class RoverSim:
     def _apply_soil_law(self, dt: float) -> None:
         sd = self._sd_view.tolist()  # all wheel-soil inputs in one read (layout: models/mer/rover.xml)
         pos = [(sd[k], sd[k + 1], sd[k + 2]) for k in (4, 11, 18, 25, 32, 39)]
+        f = self.law.evaluate(sd, self._material_under(pos), dt)
+        com = self._xipos[self._wheel_body].tolist()
+        wrench = self._wrench
+        for w in range(6):
+            fx, fy, fz = f[3 * w], f[3 * w + 1], f[3 * w + 2]
+            (px, py, pz), (cx, cy, cz) = pos[w], com[w]
+            rx, ry, rz = px - cx, py - cy, pz - cz
+            wrench[w] = (fx, fy, fz, ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx)
+        self._xfrc[self._wheel_body] = wrench
+
+    def _apply_soil_law_wr(self, dt: float) -> None:
+        """The experimental Wong-Reece law: forces plus the soil's torque about each axle; then the ruts."""
+        sd = self._sd_view.tolist()
+        pos = [(sd[k], sd[k + 1], sd[k + 2]) for k in (4, 11, 18, 25, 32, 39)]
         law = self.law
         mats = self._material_under(pos)
         f = law.evaluate(sd, mats, dt)
@@ -256,7 +290,8 @@ class RoverSim:
     def safety_issue(self, margin_m: float = 0.3, slide_speed_m_s: float = 0.15) -> tuple[str, str] | None:
         """``("left_terrain", why)`` when a wheel is within ``margin_m`` of the heightfield's edge or the rover is
         below the ground, ``("slid_down_slope", why)`` when the rover moves faster than any drive command could
-        move it (MER's wheels turn at most 5 cm/s): the slope is too steep for the soil to hold. None otherwise."""
+        move it (MER's wheels turn at most 5 cm/s): the slope is too steep for the soil to hold. None otherwise.
+        Missions check it only with the experimental soil model (see Mission.tick)."""
         t = self.time_s
         c = self.wheel_centres_m()
         hx, hy = self._half_x - margin_m, self._half_y - margin_m

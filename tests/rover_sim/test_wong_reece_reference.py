@@ -1,4 +1,5 @@
-"""The law against the independent Wong–Reece reference (tests/rover_sim/wong_reece_reference.py).
+"""The experimental (opt-in, ``soil_model = "wong_reece"``) law against the independent Wong–Reece reference
+(tests/rover_sim/wong_reece_reference.py).
 
 Where the two models overlap (the law's wheel with no grousers and a rigid rim) DP/W, torque and sinkage agree
 over slip 0.05-0.95 to the table's interpolation error. The MER wheel's deliberate differences are bounded:
@@ -17,7 +18,7 @@ import numpy as np
 import pytest
 from wong_reece_reference import lateral_force, wheel
 
-from rover_sim.sim.terramechanics import SAND, WheelParams, WheelSoilLaw, pack_inputs
+from rover_sim.sim.terramechanics_wr import SAND, WheelParams, WheelSoilLaw, pack_inputs
 
 W_N = 108.0
 R_M, B_M = 0.125, 0.16
