@@ -240,7 +240,10 @@ class RoverEnv(gymnasium.Env):
             Sun(sc.sun.azimuth_deg, sc.sun.elevation_deg, self.shadows),
             texture_rgb=texture,
             timestep_s=sc.physics.timestep_s,
+            soil_model=sc.physics.soil_model,
         )
+        if sc.physics.deformable:
+            self._sim.enable_deformation()
         noise = ImageNoise(seed=0) if self.image_noise else None  # its generator is re-seeded on every reset
         config = RenderConfig(resolution_px=self.resolution_px, noise=noise, shadows=self.shadows)
         self._renderer = StereoRenderer(self._sim, config)

@@ -29,6 +29,21 @@ def slip_cases(result: dict) -> list[Case]:
     return out
 
 
+def mobility_cases(result: dict) -> list[Case]:
+    """`bench slip --soil-model wong_reece`: one case per slip row and per mobility check (experimental law)."""
+    from rover_sim.bench.slip import SlipRow, anchor, passes
+
+    out = []
+    for r in result["rows"]:
+        row = SlipRow(**r)
+        msg = f"slip {100 * row.slip:.1f} %: {anchor(row.material, row.slope_deg)}"
+        out.append(case(f"{row.material} {row.slope_deg:g} deg", "bench.slip.wong_reece", passes(row), msg))
+    for c in result["checks"]:
+        msg = f"{c['measured']} (acceptance {c['acceptance']})"
+        out.append(case(c["name"], "bench.slip.wong_reece", c["ok"], msg))
+    return out
+
+
 def vo_cases(results: dict) -> list[Case]:
     """One case per VO case for MER VO, and per case for each plugin (classname ``bench.vo.<plugin>``)."""
     out = [

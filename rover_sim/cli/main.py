@@ -50,15 +50,43 @@ def check_gl_cmd() -> None:
     typer.echo("offscreen rendering OK (MUJOCO_GL=egl)")
 
 
-@bench_app.command("slip")
-def bench_slip(json: JsonOpt = None, seed: int = 0, junit: JunitOpt = None) -> None:
-    """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
-    with guarded():
-        from rover_sim.bench import slip
-        from rover_sim.bench.junit_cases import slip_cases
+SoilModelOpt = Annotated[
+    str,
+    typer.Option(
+        "--soil-model",
+        help="bekker (default: the slip benchmark of the default law) or wong_reece (EXPERIMENTAL: the issue-13 "
+        "mobility benchmark with deformable terrain; slow, writes --png).",
+    ),
+]
 
-        result = slip.run(str(json) if json else None, seed=seed)
-    finish(junit, "bench slip", slip_cases(result))
+
+@bench_app.command("slip")
+def bench_slip(
+    json: JsonOpt = None,
+    seed: int = 0,
+    junit: JunitOpt = None,
+    soil_model: SoilModelOpt = "bekker",
+    png: Annotated[str, typer.Option(help="wong_reece only: PNG of DP/W vs slip and slip vs slope.")] = (
+        "runs/bench_slip.png"
+    ),
+) -> None:
+    """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
+    if soil_model not in ("bekker", "wong_reece"):
+        _fail(ValueError(f"--soil-model must be 'bekker' or 'wong_reece', not {soil_model!r}"))
+    with guarded():
+        if soil_model == "wong_reece":
+            from rover_sim.bench import mobility
+            from rover_sim.bench.junit_cases import mobility_cases
+
+            result = mobility.run(str(json) if json else None, seed=seed, png_path=png)
+            cases = mobility_cases(result)
+        else:
+            from rover_sim.bench import slip
+            from rover_sim.bench.junit_cases import slip_cases
+
+            result = slip.run(str(json) if json else None, seed=seed)
+            cases = slip_cases(result)
+    finish(junit, "bench slip", cases)
 
 
 @bench_app.command("render")

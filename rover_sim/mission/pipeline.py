@@ -239,6 +239,10 @@ class Mission:
         if self.progress is not None:
             self.progress(t, "")
         self.check_keep_out()
+        if sim.soil_model != "bekker":  # experimental soil only: left_terrain / slid_down_slope halts (issue #13)
+            issue = sim.safety_issue()
+            if issue is not None:
+                raise Halt(*issue)
         return None
 
     def record_poses(self) -> Pose:

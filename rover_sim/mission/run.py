@@ -25,6 +25,17 @@ def layout_of(sc: Scenario) -> RunLayout:
     )
 
 
+def save_terrain_npz(terrain, heights_m: np.ndarray, path: Path) -> None:
+    """``heights_m[i, j]`` is the height at x = x0_m + j cell_size_m, y = y0_m + i cell_size_m (world metres)."""
+    np.savez(
+        path,
+        heights_m=np.asarray(heights_m, dtype=float),
+        x0_m=float(-terrain.half_x_m),
+        y0_m=float(-terrain.half_y_m),
+        cell_size_m=float(terrain.cell_size_m),
+    )
+
+
 def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     """metrics.json, trajectories/*.tum, plots/*.png, scenario.json (the resolved config) and events.log."""
     from rover_sim.io import plots
@@ -34,6 +45,9 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     (out_dir / "timing.json").write_text(json.dumps(metrics.timing | {"wall_s": metrics.wall_s}, indent=2))
     (out_dir / "scenario.json").write_text(json.dumps(mission.sc.resolved_dict(), indent=2))
     (out_dir / "events.log").write_text("\n".join(mission.events) + "\n")
+    if mission.sim.deform is not None:  # only with [physics] deformable = true (experimental)
+        save_terrain_npz(mission.terrain, mission.terrain.heights_m, out_dir / "terrain_before.npz")
+        save_terrain_npz(mission.terrain, mission.sim.terrain_heights_m(), out_dir / "terrain_after.npz")
     tdir = out_dir / "trajectories"
     tdir.mkdir(exist_ok=True)
     trajs = mission.trajectories()

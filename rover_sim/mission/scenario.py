@@ -238,8 +238,25 @@ class PassSpec(_Spec):
     )
 
 
+SOIL_MODEL_DEFAULTS = {"soil_model": "bekker", "deformable": False}
+
+
 class PhysicsSpec(_Spec):
     timestep_s: float = Field(0.005, ge=0.0005, le=0.01)
+    soil_model: Literal["bekker", "wong_reece"] = Field(
+        "bekker",
+        description="Wheel-soil law: 'bekker' (default) or the experimental 'wong_reece' (README: Experimental soil).",
+    )
+    deformable: bool = Field(False, description="Ruts, berms and multipass in the heightfield; needs 'wong_reece'.")
+
+    @model_validator(mode="after")
+    def _deformable_needs_wong_reece(self) -> PhysicsSpec:
+        if self.deformable and self.soil_model != "wong_reece":
+            raise ValueError(
+                "physics.deformable = true needs physics.soil_model = 'wong_reece' "
+                f"(allowed soil_model values: 'bekker', 'wong_reece'; got {self.soil_model!r})"
+            )
+        return self
 
 
 class Scenario(_Spec):
@@ -273,7 +290,12 @@ class Scenario(_Spec):
         return self
 
     def resolved_dict(self) -> dict[str, Any]:
-        return json.loads(self.model_dump_json(by_alias=True))
+        d = json.loads(self.model_dump_json(by_alias=True))
+        # the opt-in soil fields appear only when set: the default scenario.json and sweep job ids stay as they were
+        for key, default in SOIL_MODEL_DEFAULTS.items():
+            if d["physics"].get(key) == default:
+                del d["physics"][key]
+        return d
 
 
 def _list_index(node: list, key: str, dotted: str, where: str) -> int:

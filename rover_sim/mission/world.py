@@ -53,7 +53,10 @@ class World:
             Sun(scenario.sun.azimuth_deg, scenario.sun.elevation_deg, scenario.sun.shadows),
             texture_rgb=texture,
             timestep_s=scenario.physics.timestep_s,
+            soil_model=scenario.physics.soil_model,
         )
+        if scenario.physics.deformable:  # experimental, wong_reece only: ruts, berms, multipass (sim/deform.py)
+            self.sim.enable_deformation()
         self.sim.lock_wheels(list(scenario.faults.locked_wheels))
         st = scenario.start
         self.sim.place(st.x_m, st.y_m, math.radians(st.yaw_deg))

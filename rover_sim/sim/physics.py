@@ -15,7 +15,10 @@ from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
 from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
 if TYPE_CHECKING:
+    from rover_sim.sim.deform import DeformableTerrain
     from terrains import Terrain
+
+SOIL_MODELS = ("bekker", "wong_reece")  # [physics] soil_model: the default law, the experimental opt-in one
 
 WHEEL_RADIUS_M = 0.125
 WHEEL_WIDTH_M = 0.16
@@ -63,6 +66,9 @@ class RoverSim:
     """A MER rover on a terrain: physics, the wheel–soil law and named accessors.
 
     ``soil_law=False`` gives the bare MuJoCo model (frictionless wheels, nothing applied) for speed comparisons.
+    ``soil_model`` picks the wheel-soil law: ``"bekker"`` (default, :mod:`rover_sim.sim.terramechanics`) or the
+    experimental ``"wong_reece"`` (:mod:`rover_sim.sim.terramechanics_wr`), the only one that supports
+    :meth:`enable_deformation`.
     """
 
     def __init__(
@@ -72,7 +78,10 @@ class RoverSim:
         soil_law: bool = True,
         texture_rgb: np.ndarray | None = None,
         timestep_s: float | None = None,
+        soil_model: str = "bekker",
     ) -> None:
+        if soil_model not in SOIL_MODELS:
+            raise ValueError(f"soil_model must be one of {', '.join(SOIL_MODELS)}, not {soil_model!r}")
         self.terrain = terrain
         self.sun = sun or Sun()
         self.spec = build_spec(terrain, self.sun, texture_rgb=texture_rgb)
@@ -81,7 +90,15 @@ class RoverSim:
         self.model = self.spec.compile()
         self.data = mujoco.MjData(self.model)
         self.soil_law_enabled = soil_law
-        self.law = WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
+        self.soil_model = soil_model
+        self.deform: DeformableTerrain | None = None  # attached by enable_deformation() (wong_reece only)
+        if soil_model == "wong_reece":
+            from rover_sim.sim import terramechanics_wr
+
+            self.law = terramechanics_wr.WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
+            self._apply_soil_law = self._apply_soil_law_wr  # the default law's path stays untouched
+        else:
+            self.law = WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
         m = self.model
         self._wheel_body = np.array([m.body(f"wheel_{w}").id for w in WHEELS])
         self._wheel_qadr = np.array([m.jnt_qposadr[m.joint(f"wheel_{w}").id] for w in WHEELS])
@@ -127,6 +144,21 @@ class RoverSim:
         self.reset()
 
     # ------------------------------------------------------------------ setup
+    def enable_deformation(self) -> DeformableTerrain:
+        """Make the heightfield deformable under the wheels (ruts, berms, multipass; see sim/deform.py).
+        Experimental; only with ``soil_model="wong_reece"`` (it reads that law's sinkage, axles and presink)."""
+        if self.soil_model != "wong_reece":
+            raise ValueError(f"deformable terrain needs soil_model 'wong_reece', not {self.soil_model!r}")
+        if self.deform is None:
+            from rover_sim.sim.deform import DeformableTerrain
+
+            self.deform = DeformableTerrain(self, tuple(m.deformable for m in self.law.materials))
+        return self.deform
+
+    def terrain_heights_m(self) -> np.ndarray:
+        """The current ground heights on the terrain's grid (the deformed surface when deformation is on)."""
+        return self.deform.heights_m() if self.deform is not None else np.asarray(self.terrain.heights_m).copy()
+
     def _sensor_slice(self, name: str) -> slice:
         s = self.model.sensor(name)
         return slice(int(s.adr[0]), int(s.adr[0] + s.dim[0]))
@@ -221,6 +253,30 @@ class RoverSim:
             wrench[w] = (fx, fy, fz, ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx)
         self._xfrc[self._wheel_body] = wrench
 
+    def _apply_soil_law_wr(self, dt: float) -> None:
+        """The experimental Wong-Reece law: forces plus the soil's torque about each axle; then the ruts."""
+        sd = self._sd_view.tolist()
+        pos = [(sd[k], sd[k + 1], sd[k + 2]) for k in (4, 11, 18, 25, 32, 39)]
+        law = self.law
+        mats = self._material_under(pos)
+        f = law.evaluate(sd, mats, dt)
+        com = self._xipos[self._wheel_body].tolist()
+        axles = law.axles
+        wrench = self._wrench
+        for w in range(6):
+            o = 4 * w
+            fx, fy, fz, T = f[o], f[o + 1], f[o + 2], f[o + 3]
+            (px, py, pz), (cx, cy, cz) = pos[w], com[w]
+            rx, ry, rz = px - cx, py - cy, pz - cz
+            mx, my, mz = ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx
+            # the soil's torque about the axle is the law's T (resisting the spin), not the lever of the net force
+            ax, ay, az = axles[w]
+            corr = -T - (mx * ax + my * ay + mz * az)
+            wrench[w] = (fx, fy, fz, mx + corr * ax, my + corr * ay, mz + corr * az)
+        self._xfrc[self._wheel_body] = wrench
+        if self.deform is not None:
+            self.deform.after_law(self, pos, mats)
+
     def _material_under(self, pos: list[tuple[float, float, float]]) -> list[int]:
         """Material index under each wheel contact; a contact well above the heightfield is on a rock."""
         out = []
@@ -230,6 +286,28 @@ class RoverSim:
             on_rock = z > self._h_list[i][j] + ROCK_CONTACT_MARGIN_M
             out.append(MATERIAL_ROCK if on_rock else self._mat_list[i][j])
         return out
+
+    def safety_issue(self, margin_m: float = 0.3, slide_speed_m_s: float = 0.15) -> tuple[str, str] | None:
+        """``("left_terrain", why)`` when a wheel is within ``margin_m`` of the heightfield's edge or the rover is
+        below the ground, ``("slid_down_slope", why)`` when the rover moves faster than any drive command could
+        move it (MER's wheels turn at most 5 cm/s): the slope is too steep for the soil to hold. None otherwise.
+        Missions check it only with the experimental soil model (see Mission.tick)."""
+        t = self.time_s
+        c = self.wheel_centres_m()
+        hx, hy = self._half_x - margin_m, self._half_y - margin_m
+        if (abs(c[:, 0]) > hx).any() or (abs(c[:, 1]) > hy).any():
+            p = self.position_m()
+            return "left_terrain", f"the rover left the terrain at t = {t:.1f} s (at x {p[0]:.2f}, y {p[1]:.2f} m)"
+        ground = self.terrain.height_at(c[:, 0], c[:, 1])
+        if (c[:, 2] < ground - 0.2).any():
+            return "left_terrain", f"the rover fell through the ground at t = {t:.1f} s"
+        v = float(np.linalg.norm(self.data.qvel[0:3]))
+        if v > slide_speed_m_s:
+            return "slid_down_slope", (
+                f"the rover slid down the slope at t = {t:.1f} s ({v:.2f} m/s; the wheels drive at most 0.05 m/s):"
+                " the soil cannot hold this slope"
+            )
+        return None
 
     def _check_divergence(self) -> None:
         d = self.data

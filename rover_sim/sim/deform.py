@@ -1,0 +1,142 @@
+"""Deformable terrain (SCM-class) under the wheels: ruts written into the MuJoCo heightfield, berms, multipass.
+
+The wheel–soil law gives each wheel's sinkage below the undisturbed surface ``z`` (Bekker + slip-sinkage). Here
+that sinkage becomes geometry, as in Chrono's SCM but on MuJoCo's heightfield grid:
+
+* **ruts**: every deformable cell under a wheel's contact patch (a ``width x (contact length + one cell)``
+  rectangle along the wheel's heading) is lowered to ``h0 - z`` (``h0`` the undisturbed height), never raised by a
+  wheel; physics sees it at once (``model.hfield_data``), so the rover rides in its ruts;
+* **berms**: the soil a wheel pushes down is put back beside the rut (the cells from half a width to half a width
+  plus ``BERM_CELLS`` cells on each side, equally): volume is conserved to the grid's resolution;
+* **multipass / compaction**: a rut is plastic: a later wheel deepens it only where its own sinkage is larger
+  (SCM's loading-only-beyond-the-previous-maximum); the law is told the rut depth ahead of each wheel
+  (``law.presink_m``), so only the new compaction resists (a second pass sinks less and rolls easier);
+* **no change** on bedrock, mixed-on-rock cells marked non-deformable, or when the wheel is on a rock.
+
+Updates are throttled: a wheel writes when its contact has moved ``UPDATE_M`` or its sinkage grew 1 mm since its
+last write, so the per-step cost is a distance check per wheel (see ``rover-sim bench slip``'s speed rows).
+
+Rendering: the render model draws LOD tile meshes, not the physics heightfield (``rover_sim.render.tiles``); the
+tiles are not re-meshed here, so camera images do not show the ruts yet — the physics heightfield and
+``terrain_after.npz`` do.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from rover_sim.sim.physics import RoverSim
+
+UPDATE_M = 0.02  # contact travel between rut writes (half a 4 cm cell)
+BERM_CELLS = 2
+SINK_FILTER_S = 0.5
+
+
+class DeformableTerrain:
+    """The heightfield of ``sim`` made deformable; ``heights_m()`` is the current surface (same grid as the terrain)."""
+
+    def __init__(self, sim: RoverSim, deformable_materials: tuple[bool, ...]) -> None:
+        m, t = sim.model, sim.terrain
+        self.model = m
+        hid = m.hfield("terrain").id
+        self._adr = int(m.hfield_adr[hid])
+        self._nrow, self._ncol = int(m.hfield_nrow[hid]), int(m.hfield_ncol[hid])
+        self._scale = float(m.hfield_size[hid][2])  # elevation range
+        self._base = float(m.geom("terrain").pos[2])
+        self._cell = t.cell_size_m
+        self._x0, self._y0 = -t.half_x_m, -t.half_y_m
+        h0 = np.asarray(t.heights_m, dtype=float)
+        self.heights_before_m = h0.copy()
+        self._h0 = h0.tolist()
+        self._h = h0.tolist()
+        mats = np.asarray(t.materials, dtype=int)
+        self._soft = np.asarray(deformable_materials, dtype=bool)[mats].tolist()
+        self._hf = m.hfield_data
+        self._last = [(math.inf, math.inf, 0.0)] * 6  # contact x, y and sinkage at each wheel's last write
+        self._zf = [0.0] * 6  # sinkage low-passed over SINK_FILTER_S (load spikes of vibration do not dig)
+        self._alpha = sim.timestep_s / (SINK_FILTER_S + sim.timestep_s)
+        self.enabled = True
+
+    # ------------------------------------------------------------------ state
+    def heights_m(self) -> np.ndarray:
+        return np.array(self._h)
+
+    def rut_depth_at(self, x: float, y: float) -> float:
+        """Depth of the surface below the undisturbed ground at (x, y) (nearest cell), m (negative on a berm)."""
+        i, j = self._cell_of(x, y)
+        return self._h0[i][j] - self._h[i][j]
+
+    def _cell_of(self, x: float, y: float) -> tuple[int, int]:
+        j = min(max(int((x - self._x0) / self._cell + 0.5), 0), self._ncol - 1)
+        i = min(max(int((y - self._y0) / self._cell + 0.5), 0), self._nrow - 1)
+        return i, j
+
+    # ------------------------------------------------------------------ per physics step
+    def after_law(self, sim: RoverSim, pos: list[tuple[float, float, float]], mats: list[int]) -> None:
+        """Called by RoverSim after the soil law each step: presink for the law, ruts where a wheel has moved."""
+        if not self.enabled:
+            return
+        law = sim.law
+        st = law.out_state()
+        W, z_all = st[0], st[1]
+        axles = law.axles
+        for w in range(6):
+            if W[w] <= 0.0 or not law.materials[mats[w]].deformable:
+                law.presink_m[w] = self._zf[w] = 0.0
+                continue
+            px, py, _ = pos[w]
+            ax, ay, _ = axles[w]
+            hx, hy = ay, -ax  # heading = axle x up, projected
+            hn = math.hypot(hx, hy) or 1.0
+            hx, hy = hx / hn, hy / hn
+            lp = law.patch_length(w)
+            lead = 0.5 * lp + UPDATE_M + 2.5 * self._cell  # beyond this wheel's own footprint
+            law.presink_m[w] = max(self.rut_depth_at(px + lead * hx, py + lead * hy), 0.0)
+            lx, ly, lz = self._last[w]
+            z = self._zf[w] = self._zf[w] + self._alpha * (z_all[w] - self._zf[w])
+            if (px - lx) ** 2 + (py - ly) ** 2 < UPDATE_M * UPDATE_M and z < lz + 0.001:
+                continue
+            self._last[w] = (px, py, z)
+            self._write_rut(px, py, hx, hy, z, lp, law.width_m)
+
+    def _write_rut(self, px: float, py: float, hx: float, hy: float, z: float, lp: float, width: float) -> None:
+        cell = self._cell
+        # behind: the patch; ahead: the patch plus the travel until the next write and a cell, so that the
+        # collision sphere never meets the rut's front edge (the law already resists the motion: no double count)
+        back, front, half_w = 0.5 * lp + 0.5 * cell, 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
+        reach = half_w + BERM_CELLS * cell
+        span = int(math.ceil(max(front, reach) / cell)) + 1
+        ci, cj = self._cell_of(px, py)
+        h, h0, soft = self._h, self._h0, self._soft
+        displaced = 0.0
+        berm: list[tuple[int, int]] = []
+        for i in range(max(ci - span, 0), min(ci + span + 1, self._nrow)):
+            dy = self._y0 + i * cell - py
+            row_h, row_h0, row_soft = h[i], h0[i], soft[i]
+            for j in range(max(cj - span, 0), min(cj + span + 1, self._ncol)):
+                if not row_soft[j]:
+                    continue
+                dx = self._x0 + j * cell - px
+                along, across = dx * hx + dy * hy, abs(-dx * hy + dy * hx)
+                if along > front or along < -back:
+                    continue
+                if across <= half_w:
+                    target = row_h0[j] - z
+                    if target < row_h[j]:
+                        displaced += row_h[j] - target
+                        row_h[j] = target
+                        self._push(i, j)
+                elif across <= reach:
+                    berm.append((i, j))
+        if displaced > 0.0 and berm:
+            dh = displaced / len(berm)
+            for i, j in berm:
+                h[i][j] += dh
+                self._push(i, j)
+
+    def _push(self, i: int, j: int) -> None:
+        self._hf[self._adr + i * self._ncol + j] = (self._h[i][j] - self._base) / self._scale
