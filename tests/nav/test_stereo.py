@@ -248,6 +248,42 @@ def test_workspace_reuse_is_stateless(stereo_scene: SynthPair, stereo_scene_disp
     np.testing.assert_array_equal(again[np.isfinite(again)], stereo_scene_disparity[np.isfinite(again)])
 
 
+@pytest.mark.parametrize("row_window", [True, False])
+def test_disparity_does_not_depend_on_prior_buffer_contents(
+    stereo_scene: SynthPair, monkeypatch: pytest.MonkeyPatch, row_window: bool
+) -> None:
+    """The cached pipeline's buffers come from ``np.empty``: whatever the allocator hands back (process history)
+    must not reach the result. A fresh pipeline whose uninitialised buffers hold zeros, then random bytes
+    (NaNs, infinities, huge values included), gives the same disparity bit for bit."""
+    import importlib
+
+    pipeline_mod = importlib.import_module("nav.stereo.pipeline")
+    bandpass_mod = importlib.import_module("nav.stereo.bandpass")
+    params = StereoParams(row_window=row_window)
+    pool = np.random.default_rng(7).integers(0, 256, 2**24, dtype=np.uint8)
+    real_empty = np.empty
+
+    def fresh_run(fill: str, offset: int) -> np.ndarray:
+        def empty(shape, dtype=float, *args, **kwargs):  # noqa: ANN001, ANN202
+            arr = real_empty(shape, dtype, *args, **kwargs)
+            raw = arr.reshape(-1).view(np.uint8)
+            raw[...] = 0 if fill == "zeros" else pool[offset : offset + raw.size]
+            return arr
+
+        monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
+        monkeypatch.setattr(bandpass_mod._THREAD, "scratch", {}, raising=False)
+        with monkeypatch.context() as m:
+            m.setattr(np, "empty", empty)
+            return compute_disparity(stereo_scene.left, stereo_scene.right, params)
+
+    ref = fresh_run("zeros", 0)
+    assert np.isfinite(ref).mean() > 0.5
+    for offset in (0, 1, 4093):
+        got = fresh_run("garbage", offset)
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(ref))
+        np.testing.assert_array_equal(got[np.isfinite(got)], ref[np.isfinite(ref)])
+
+
 # --------------------------------------------------------------------------------------------------------------
 # Density and accuracy on a tilted ground plane with blocks
 # --------------------------------------------------------------------------------------------------------------
