@@ -92,6 +92,12 @@ def test_do_nothing_vo_fails_the_shadow_case(stubs, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured: with ideal sensors the inlier threshold is not binding; x10 moves VO error by < 0.04 pp "
+    "(rock_localization 0.065 -> 0.07 %, msstb 0.301 -> 0.333 %, sol235 and wopmay unchanged), inside the gate's "
+    "+25 %/+0.1 pp: issue #17's 'loosened VO trips the gate' does not hold yet",
+)
 def test_loosened_vo_trips_the_regression_gate(tmp_path):
     """Inlier threshold x 10 (0.75 -> 7.5 px): the committed baseline's gate must flag the run."""
     from rover_sim.bench.missions import _committed
