@@ -347,7 +347,7 @@ def run_cmd(
         f"{pct(metrics.max_slip_pct)}"
     )
     where = f"outputs in {out}/ (plots in {out}/plots/)"
-    typer.echo(f"{where}; open the recording with: rerun {out}/recording.rrd" if record else where)
+    typer.echo(f"{where}; open the recording with: rover-sim view {out}" if record else where)
     finish(junit, "run", [scenario_case(metrics.deterministic_dict(), "run")])  # status: see rover_sim.cli.status
 
 
