@@ -48,6 +48,7 @@ from functools import lru_cache
 import numpy as np
 
 from rover_sim.sim.soil_tables import N_LOAD, N_SLIP, SoilParams, WheelParams, build_table
+from rover_sim.sim.terramechanics import pack_inputs  # noqa: F401 - the same input layout as the default law
 
 __all__ = ["BEDROCK", "MATERIALS", "MIXED", "SAND", "SoilParams", "WheelParams", "WheelSoilLaw", "WheelSoilState"]
 
@@ -331,19 +332,3 @@ class WheelSoilLaw:
             out_slip[w] = (v_rim - v_x) / v_rim if abs(v_rim) > _ROLLING_EPS_M_S else math.nan
         return out
 
-
-def pack_inputs(
-    normal_force_w: np.ndarray,
-    contact_pos_w: np.ndarray,
-    hub_vel_w: np.ndarray,
-    heading_w: np.ndarray,
-    wheel_rate_rad_s: np.ndarray,
-) -> list[float]:
-    """Build :meth:`WheelSoilLaw.evaluate`'s flat input list from (n, 3) arrays (ground reaction on each wheel,
-    contact points, hub velocities, headings) and (n,) spin rates. For tests and offline analysis."""
-    normal_force_w = np.asarray(normal_force_w, dtype=float)
-    found = (np.linalg.norm(normal_force_w, axis=1) > 0).astype(float)[:, None]
-    contact = np.hstack([found, -normal_force_w, np.asarray(contact_pos_w, dtype=float)])
-    return np.concatenate(
-        [contact.ravel(), np.ravel(hub_vel_w), np.ravel(heading_w), np.ravel(wheel_rate_rad_s)]
-    ).tolist()
