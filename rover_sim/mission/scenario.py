@@ -18,6 +18,7 @@ from nav.gestalt import GestaltParams
 from nav.stereo import StereoParams
 from nav.vo import SanityConstraints, VoParams
 from rover_sim.errors import ConfigError
+from rover_sim.mission.sensors_spec import SensorsSpec
 from rover_sim.resources import scenarios_dir
 from terrains import TerrainRecipe
 
@@ -273,6 +274,7 @@ class Scenario(_Spec):
     faults: FaultSpec = Field(default_factory=FaultSpec)
     passing: PassSpec = Field(default_factory=PassSpec, alias="pass")
     physics: PhysicsSpec = Field(default_factory=PhysicsSpec)
+    sensors: SensorsSpec = Field(default_factory=SensorsSpec)
     fast: bool = Field(False, description="Part of the fast CI suite.")
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)
