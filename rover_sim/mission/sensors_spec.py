@@ -15,11 +15,13 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from rover_sim.render.imaging import ImagingSpec
+
 Profile = Literal["flight", "ideal"]
 DEFAULT_PROFILE: Profile = "ideal"
 
 #: sub-table name -> model class (with ``profile_defaults(profile) -> dict``); filled as error families land
-SUBTABLES: dict[str, type[BaseModel]] = {}
+SUBTABLES: dict[str, type[BaseModel]] = {"imaging": ImagingSpec}
 
 
 class SensorsSpec(BaseModel):
@@ -28,6 +30,7 @@ class SensorsSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, validate_default=True)
 
     profile: Profile = Field(DEFAULT_PROFILE, description="'flight' (errors as flown) or 'ideal' (none).")
+    imaging: ImagingSpec = Field(default_factory=ImagingSpec)
 
     @model_validator(mode="before")
     @classmethod

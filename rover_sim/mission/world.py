@@ -66,7 +66,14 @@ class World:
         self.sensors = SensorSuite(self.sim, seed=scenario.seed)  # samples the IMU inside the physics loop
         noise = ImageNoise(seed=scenario.seed) if scenario.nav.image_noise else None
         self.renderer = StereoRenderer(
-            self.sim, RenderConfig(resolution_px=scenario.nav.resolution_px, noise=noise, shadows=scenario.sun.shadows)
+            self.sim,
+            RenderConfig(
+                resolution_px=scenario.nav.resolution_px,
+                noise=noise,
+                shadows=scenario.sun.shadows,
+                imaging=scenario.sensors.imaging,
+                imaging_seed=scenario.seed,
+            ),
         )
         self._rigs: dict[str, StereoRig] = {}
         self.calibrate(scenario.nav.camera)

@@ -47,6 +47,7 @@ import numpy as np
 from nav.camera import PinholeCamera, StereoRig
 from rover_sim.errors import RenderingUnavailable
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
+from rover_sim.render.imaging import ImageFormation, ImagingSpec
 from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles: re-exported from here
     GROUP_HIDDEN,
     GROUP_SHOWN,
@@ -112,6 +113,8 @@ class RenderConfig:
     sun_intensity: float = 1.3  # diffuse strength of the sun (above 1: exposure gain; GL clamps per channel)
     sky_ambient: float = 0.5  # uniform ambient light standing in for the dusty sky
     noise: ImageNoise | None = None
+    imaging: ImagingSpec | None = None  # the ``ccd`` chain (flight profile) replaces ``noise``; None/ideal: as before
+    imaging_seed: int = 0
 
     def __post_init__(self) -> None:
         if self.resolution_px < 8 or self.binning < 1:
@@ -422,6 +425,9 @@ class StereoRenderer:
         self.shadows = self.config.shadows and sim.sun.shadows  # switch per render: ``renderer.shadows = False``
         self._renderers: dict[int, mujoco.Renderer] = {}
         self._rng = np.random.default_rng(self.config.noise.seed) if self.config.noise else None
+        im = self.config.imaging
+        ccd = im is not None and im.model != "ideal"
+        self.imaging = ImageFormation(im, self.config.imaging_seed, self.config.binning) if ccd else None
         self._right_cam = mujoco.MjvCamera()
         self._right_cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self.last_drawn: dict = {}  # what the last render drew (tiles, rocks, tile levels): diagnostics
@@ -486,9 +492,11 @@ class StereoRenderer:
         self._right_cam.fixedcamid = self.world.model.camera(cam_name).id
         mujoco.mjv_updateCamera(self.world.model, self.world.data, self._right_cam, r.scene)
 
-    def _grey(self, rgb: np.ndarray) -> np.ndarray:
-        luma = bin_average(rgb.astype(np.float32) @ LUMA_WEIGHTS, self.config.binning)
-        return quantise(luma, self.config.noise, self._rng)
+    def _grey(self, rgb: np.ndarray, cam_name: str) -> np.ndarray:
+        luma = rgb.astype(np.float32) @ LUMA_WEIGHTS
+        if self.imaging is not None:  # flight: exposure, photons, noise, ADC, binning, companding (imaging.py)
+            return self.imaging.form(luma, cam_name)
+        return quantise(bin_average(luma, self.config.binning), self.config.noise, self._rng)
 
     # -- public renders
     def render_pair(self, pair: str = "navcam") -> StereoFrame:
@@ -497,9 +505,9 @@ class StereoRenderer:
             raise ValueError(f"unknown stereo pair {pair!r}; choose one of {STEREO_PAIRS}")
         names = [f"{pair}_left", f"{pair}_right"]
         r = self._scene_for(names, self.config.native_px)
-        left = self._grey(r.render())
+        left = self._grey(r.render(), names[0])
         self._switch_camera(r, names[1])
-        right = self._grey(r.render())
+        right = self._grey(r.render(), names[1])
         return StereoFrame(self.sim.time_s, self.rig(pair), left, right, dict(self.last_drawn))
 
     def render_rgb(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
@@ -509,7 +517,7 @@ class StereoRenderer:
 
     def render_grey(self, cam_name: str) -> np.ndarray:
         """Greyscale image of one camera, processed like :meth:`render_pair` (binning, noise)."""
-        return self._grey(self._scene_for([cam_name], self.config.native_px).render())
+        return self._grey(self._scene_for([cam_name], self.config.native_px).render(), cam_name)
 
     def render_depth(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
         """(H, W) float32 z-depth in metres along the optical axis (OpenCV z) at pixel centres; inf = sky.
