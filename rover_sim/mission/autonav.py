@@ -19,6 +19,7 @@ import numpy as np
 
 from nav.gestalt import Arc as GestaltArc
 from nav.gestalt import arc_pose
+from rover_sim.mission.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
 from rover_sim.mission.onboard import (  # noqa: F401 (re-exported for callers of the old module)
     MAX_RANGE_M,
     SELF_MASK_HALF_LENGTH_M,
@@ -92,6 +93,7 @@ def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
         obs = mission.world.observation_with([], [], frames)
         mission.notify_images(obs)
         cycle = onboard.plan(obs, goal, cameras)
+        mission.world.charge("computing", AUTONAV_CYCLE_S - IMAGE_PAIR_ACQUIRE_S)  # the cycle time includes a pair
         decision = cycle.decision
         stats.cycle_ms.append(cycle.ms)
         stats.cycles += 1

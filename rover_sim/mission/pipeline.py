@@ -27,6 +27,7 @@ from rover_sim.errors import PhysicsDiverged, PluginError
 from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission import acceptance
 from rover_sim.mission.acceptance import TALL_ROCK_M
+from rover_sim.mission.clock import VO_STEP_COMPUTE_S
 from rover_sim.mission.evaluator import Evaluator, Metrics, VoStepRecord
 from rover_sim.mission.observation import Observation
 from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
@@ -281,6 +282,7 @@ class Mission:
         obs = self.world.observation_with([], [], {camera: frame})
         self.notify_images(obs)
         out = self.onboard.vo_step(obs, camera)
+        self.world.charge("computing", VO_STEP_COMPUTE_S)
         res = out.result
         record = self.evaluator.vo_step(
             self.world.truth_pose(), res.status, res.motion_rover, out.commanded_m, int(res.n_inliers), out.ms,
@@ -393,6 +395,9 @@ class Mission:
         extra: dict = {}
         if self.evaluator.keep_out_info:
             extra["keep_out"] = self.evaluator.keep_out_info
+        clock = self.world.clock_summary()
+        if clock is not None:  # only with a moving sun (sun.local_solar_time_h): other metrics stay as they were
+            extra["clock"] = clock
         timing: dict = {}
         if self.autonav_stats is not None:
             extra["autonav"] = {

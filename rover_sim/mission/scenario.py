@@ -20,9 +20,11 @@ from nav.vo import SanityConstraints, VoParams
 from rover_sim.errors import ConfigError
 from rover_sim.mission.sensors_spec import SensorsSpec
 from rover_sim.resources import scenarios_dir
+from rover_sim.sim.ephemeris import sun_azimuth_elevation_deg
 from terrains import TerrainRecipe
 
 SCENARIOS_DIR = scenarios_dir()
+MIN_SUN_ELEVATION_DEG = 2.0  # lowest sun the renderer is asked for (shadow maps degrade at grazing light)
 
 
 class _Spec(BaseModel):
@@ -30,9 +32,36 @@ class _Spec(BaseModel):
 
 
 class SunSpec(_Spec):
+    """The sun: fixed (``azimuth_deg``, ``elevation_deg``) or, with ``local_solar_time_h``, moving with the time of
+    day along the ephemeris (:mod:`rover_sim.sim.ephemeris`) while the mission clock runs (issue #16 item 4)."""
+
     azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0, description="From +x (east) toward +y (north).")
     elevation_deg: float = Field(45.0, ge=2.0, le=90.0, description="Above the horizon.")
     shadows: bool = True
+    latitude_deg: float = Field(0.0, ge=-90.0, le=90.0, description="Site latitude (ephemeris only).")
+    solar_longitude_deg: float = Field(0.0, ge=0.0, lt=360.0, description="Season Ls (ephemeris only).")
+    local_solar_time_h: float | None = Field(
+        None, ge=0.0, lt=24.0, description="LTST at the start of the drive; set: the sun follows the ephemeris."
+    )
+
+    @model_validator(mode="after")
+    def _sun_above_horizon(self) -> SunSpec:
+        if self.local_solar_time_h is not None:
+            el = sun_azimuth_elevation_deg(self.latitude_deg, self.solar_longitude_deg, self.local_solar_time_h)[1]
+            if el < MIN_SUN_ELEVATION_DEG:
+                raise ValueError(
+                    f"sun.local_solar_time_h = {self.local_solar_time_h}: the sun is {el:.1f} deg high at latitude "
+                    f"{self.latitude_deg}, Ls {self.solar_longitude_deg}; choose a time with it >= "
+                    f"{MIN_SUN_ELEVATION_DEG} deg"
+                )
+        return self
+
+    def azimuth_elevation_at(self, local_solar_time_h: float | None) -> tuple[float, float]:
+        """(azimuth, elevation) in degrees at ``local_solar_time_h`` (fixed values without an ephemeris time)."""
+        if local_solar_time_h is None:
+            return self.azimuth_deg, self.elevation_deg
+        az, el = sun_azimuth_elevation_deg(self.latitude_deg, self.solar_longitude_deg, local_solar_time_h)
+        return az, max(el, MIN_SUN_ELEVATION_DEG)  # a drive running into dusk keeps a grazing sun
 
 
 class TexturePatch(_Spec):

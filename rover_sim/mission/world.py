@@ -16,6 +16,7 @@ from types import MappingProxyType
 
 from nav.camera import StereoRig
 from nav.trajectory import Pose
+from rover_sim.mission.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
 from rover_sim.mission.observation import Observation, StereoImages
 from rover_sim.mission.scenario import Scenario
 from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoFrame, StereoRenderer, terrain_texture
@@ -39,6 +40,9 @@ class World:
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
         self.terrain = synthesize(scenario.terrain, scenario.seed)
+        lst = scenario.sun.local_solar_time_h  # set: the sun moves with the mission clock (issue #16 item 4)
+        self.clock = MissionClock(lst) if lst is not None else None
+        sun_az_deg, sun_el_deg = scenario.sun.azimuth_elevation_at(lst)
         ap = scenario.appearance
         texture = terrain_texture(
             self.terrain,
@@ -50,7 +54,7 @@ class World:
         )
         self.sim = RoverSim(
             self.terrain,
-            Sun(scenario.sun.azimuth_deg, scenario.sun.elevation_deg, scenario.sun.shadows),
+            Sun(sun_az_deg, sun_el_deg, scenario.sun.shadows),
             texture_rgb=texture,
             timestep_s=scenario.physics.timestep_s,
             soil_model=scenario.physics.soil_model,
@@ -78,7 +82,9 @@ class World:
         self._rigs: dict[str, StereoRig] = {}
         self.calibrate(scenario.nav.camera)
         # the ephemeris: the sun's direction over the site (fixed over a drive of minutes)
-        self.sun_direction_world = Sun(scenario.sun.azimuth_deg, scenario.sun.elevation_deg).direction()
+        # (moves with the mission clock when the scenario sets local_solar_time_h)
+        self.sun_direction_world = Sun(sun_az_deg, sun_el_deg).direction()
+        self._clock_sim_s = self.sim.time_s
         # the operator-given start of the drive (previous localisation and sun finding), fixed once settled
         self.operator_start_pose = Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz())
 
@@ -104,7 +110,34 @@ class World:
         return self.observation_with(imu, encoders, {c: self.render(c) for c in cameras})
 
     def render(self, camera: str) -> StereoFrame:
+        """Take a stereo pair; with a mission clock, the sun is first moved to the time of day of the pair."""
+        if self.clock is not None:
+            self.charge("driving", self.sim.time_s - self._clock_sim_s)
+            self._clock_sim_s = self.sim.time_s
+            self.move_sun()
+            self.clock.charge("imaging", IMAGE_PAIR_ACQUIRE_S)
         return self.renderer.render_pair(camera)
+
+    # ------------------------------------------------------------------ time of day (mission clock)
+    def charge(self, activity: Activity, seconds: float) -> None:
+        """Account ``seconds`` of ``activity`` on the mission clock (no-op without one)."""
+        if self.clock is not None:
+            self.clock.charge(activity, seconds)
+
+    def move_sun(self) -> None:
+        """Point the renderer's sun and the ephemeris direction at the clock's local solar time."""
+        assert self.clock is not None
+        az, el = self.scenario.sun.azimuth_elevation_at(self.clock.local_solar_time_h)
+        self.sun_direction_world = Sun(az, el).direction()
+        self.renderer.set_sun(self.sun_direction_world)
+
+    def clock_summary(self) -> dict | None:
+        """The mission clock for metrics.json (None without one); driving charged up to now."""
+        if self.clock is None:
+            return None
+        self.charge("driving", self.sim.time_s - self._clock_sim_s)
+        self._clock_sim_s = self.sim.time_s
+        return self.clock.summary()
 
     def observation_with(self, imu: list, encoders: list, frames: dict[str, StereoFrame]) -> Observation:
         """An Observation of given sensor samples and rendered frames; each pair carries the *onboard* rig."""

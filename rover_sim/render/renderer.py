@@ -461,6 +461,10 @@ class StereoRenderer:
         sc.flags[mujoco.mjtRndFlag.mjRND_HAZE] = False
         return r
 
+    def set_sun(self, direction_world: np.ndarray) -> None:
+        """Point the sun along unit ``direction_world`` (the way sunlight travels) for the next renders."""
+        self.world.model.light_dir[self.world.sun_id] = np.asarray(direction_world, dtype=float)
+
     # -- cameras
     def rig(self, pair: str) -> StereoRig:
         """Stereo rig of ``pair`` at the output resolution, from the simulation's current state."""
