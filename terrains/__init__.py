@@ -23,6 +23,7 @@ from terrains.recipe import (
     SlopeSpec,
     TerrainRecipe,
 )
+from terrains.regolith import albedo_tile
 from terrains.synth import synthesize
 from terrains.terrain import Material, Rock, Terrain
 
@@ -45,6 +46,7 @@ __all__ = [
     "TerrainFileError",
     "TerrainRecipe",
     "albedo_texture",
+    "albedo_tile",
     "rock_albedo",
     "synthesize",
     "texture_rgb_u8",

@@ -22,6 +22,7 @@ from enum import IntEnum
 import numpy as np
 
 from terrains._noise import layer_rng, smooth_noise
+from terrains.regolith import regolith_albedo
 from terrains.terrain import Material, Rock, Terrain, bilinear_sample
 
 MARS_TINT_RGB = (0.76, 0.55, 0.40)  # butterscotch dust colour, multiplies the albedo
@@ -74,6 +75,8 @@ def albedo_texture(
     fine_soil: bool = False,
     contrast: float = 1.0,
     patches: tuple[tuple[float, float, float, float], ...] = (),
+    regolith: str = "classic",
+    sun_direction: np.ndarray | None = None,
 ) -> np.ndarray:
     """Relative albedo of the ground, ``(H, W)`` float32 in ``[0, 1]``, blended across materials.
 
@@ -82,8 +85,12 @@ def albedo_texture(
     every deviation from the mean albedo of each material. ``patches``: discs ``(x_m, y_m, radius_m, detail)``
     of coarser soil inside fine soil, where the sand's detail is ``detail`` times the ordinary sand's (1.0:
     ordinary soil texture) instead of ``FINE_SOIL_FACTOR``; the edge blends over ``PATCH_EDGE_M``. Deterministic
-    in ``(terrain, px_per_m, seed, options)``.
+    in ``(terrain, px_per_m, seed, options)``. ``regolith="multiscale"``: the sand is the world-coordinate
+    multi-scale regolith of :mod:`terrains.regolith` (fine soil, pebbles, clasts; its relief shaded for
+    ``sun_direction`` when given) instead of the classic FFT speckle.
     """
+    if regolith not in ("classic", "multiscale"):
+        raise ValueError(f"regolith must be 'classic' or 'multiscale', got {regolith!r}")
     if not (px_per_m > 0.0 and math.isfinite(px_per_m)):
         raise ValueError(f"px_per_m must be a positive number, got {px_per_m}")
     if contrast < 0.0:
@@ -93,6 +100,8 @@ def albedo_texture(
     x = -terrain.half_x_m + (np.arange(width) + 0.5) * (2.0 * terrain.half_x_m / width)
     y = -terrain.half_y_m + (np.arange(height) + 0.5) * (2.0 * terrain.half_y_m / height)
     fields = _MaterialFields((height, width), x, y, px_per_m, seed, fine_soil, contrast, patches)
+    if regolith == "multiscale":
+        fields.multiscale, fields.sun_direction = True, sun_direction
 
     present = [Material(m) for m in np.unique(terrain.materials)]
     if len(present) == 1:
@@ -123,6 +132,7 @@ class _MaterialFields:
         self.shape, self.x, self.y, self.ppm, self.seed = shape, x_m, y_m, px_per_m, seed
         self.fine_soil, self.contrast, self.patches = fine_soil, contrast, patches
         self._cache: dict[Material, np.ndarray] = {}
+        self.multiscale, self.sun_direction = False, None
 
     def of(self, material: Material) -> np.ndarray:
         builders: dict[Material, Callable[[], np.ndarray]] = {
@@ -150,6 +160,8 @@ class _MaterialFields:
 
     def _sand(self) -> np.ndarray:
         detail = self.contrast * self._sand_detail()
+        if self.multiscale:
+            return regolith_albedo(self.x, self.y, self.seed, detail=detail, sun_direction=self.sun_direction)
         speckle = self._noise(_Part.SAND_SPECKLE, 0.6)
         mottle = self._noise(_Part.SAND_MOTTLE, SAND_MOTTLE_SCALE_M * self.ppm)
         return SAND_ALBEDO + detail * (SAND_SPECKLE * speckle + SAND_MOTTLE * mottle)

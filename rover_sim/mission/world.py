@@ -14,6 +14,8 @@ from __future__ import annotations
 import math
 from types import MappingProxyType
 
+import numpy as np
+
 from nav.camera import StereoRig
 from nav.trajectory import Pose
 from rover_sim.mission.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
@@ -26,6 +28,7 @@ from rover_sim.sim.world import Sun
 from terrains import Terrain, synthesize
 
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB
+RELIEF_REBAKE_DEG = 3.0  # re-shade the soil's micro-relief when the sun has moved more than this (12 min of sun)
 SETTLE_S = 1.0  # the rover settles on the terrain before the run starts
 
 
@@ -43,15 +46,8 @@ class World:
         lst = scenario.sun.local_solar_time_h  # set: the sun moves with the mission clock (issue #16 item 4)
         self.clock = MissionClock(lst) if lst is not None else None
         sun_az_deg, sun_el_deg = scenario.sun.azimuth_elevation_at(lst)
-        ap = scenario.appearance
-        texture = terrain_texture(
-            self.terrain,
-            texture_px_per_m(self.terrain, ap.texture_px_per_m),
-            scenario.seed,
-            fine_soil=ap.fine_soil,
-            contrast=ap.contrast,
-            patches=ap.patch_tuples(),
-        )
+        self._baked_sun = Sun(sun_az_deg, sun_el_deg).direction()  # the sun the soil's micro-relief is shaded for
+        texture = self.ground_texture(self._baked_sun)
         self.sim = RoverSim(
             self.terrain,
             Sun(sun_az_deg, sun_el_deg, scenario.sun.shadows),
@@ -130,6 +126,24 @@ class World:
         az, el = self.scenario.sun.azimuth_elevation_at(self.clock.local_solar_time_h)
         self.sun_direction_world = Sun(az, el).direction()
         self.renderer.set_sun(self.sun_direction_world)
+        moved_deg = math.degrees(math.acos(min(1.0, float(self._baked_sun @ self.sun_direction_world))))
+        if self.scenario.appearance.regolith == "multiscale" and moved_deg > RELIEF_REBAKE_DEG:
+            self._baked_sun = self.sun_direction_world
+            self.renderer.set_ground_texture(self.ground_texture(self._baked_sun))
+
+    def ground_texture(self, sun_direction: np.ndarray) -> np.ndarray:
+        """The ground's RGB texture (multiscale regolith: its micro-relief shaded for ``sun_direction``)."""
+        ap = self.scenario.appearance
+        return terrain_texture(
+            self.terrain,
+            texture_px_per_m(self.terrain, ap.texture_px_per_m),
+            self.scenario.seed,
+            fine_soil=ap.fine_soil,
+            contrast=ap.contrast,
+            patches=ap.patch_tuples(),
+            regolith=ap.regolith,
+            sun_direction=sun_direction if ap.regolith == "multiscale" else None,
+        )
 
     def clock_summary(self) -> dict | None:
         """The mission clock for metrics.json (None without one); driving charged up to now."""

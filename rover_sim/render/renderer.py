@@ -178,6 +178,8 @@ def terrain_texture(
     fine_soil: bool = False,
     contrast: float = 1.0,
     patches: tuple[tuple[float, float, float, float], ...] = (),
+    regolith: str = "classic",
+    sun_direction: np.ndarray | None = None,
 ) -> np.ndarray:
     """RGB uint8 ground texture for ``RoverSim(terrain, texture_rgb=...)``: terrains' albedo times the Mars tint.
 
@@ -193,7 +195,10 @@ def terrain_texture(
             f"a {side_px:.0f} px texture exceeds the {MAX_TEXTURE_PX} px GL limit; lower px_per_m to "
             f"{MAX_TEXTURE_PX / (2.0 * max(terrain.half_x_m, terrain.half_y_m)):.0f} or less"
         )
-    albedo = albedo_texture(terrain, px_per_m, seed, fine_soil=fine_soil, contrast=contrast, patches=patches)
+    albedo = albedo_texture(
+        terrain, px_per_m, seed, fine_soil=fine_soil, contrast=contrast, patches=patches, regolith=regolith,
+        sun_direction=sun_direction,
+    )  # fmt: skip
     return texture_rgb_u8(albedo)
 
 
@@ -464,6 +469,16 @@ class StereoRenderer:
     def set_sun(self, direction_world: np.ndarray) -> None:
         """Point the sun along unit ``direction_world`` (the way sunlight travels) for the next renders."""
         self.world.model.light_dir[self.world.sun_id] = np.asarray(direction_world, dtype=float)
+
+    def set_ground_texture(self, texture_rgb: np.ndarray) -> None:
+        """Replace the terrain texture (same size; ``terrain_texture`` layout) in the model and every GL context."""
+        m = self.world.model
+        tid = m.texture("terrain_albedo").id
+        adr, h, w = int(m.tex_adr[tid]), int(m.tex_height[tid]), int(m.tex_width[tid])
+        if texture_rgb.shape != (h, w, 3):
+            raise ValueError(f"ground texture must be {(h, w, 3)}, got {texture_rgb.shape}")
+        m.tex_data[adr : adr + h * w * 3] = np.ascontiguousarray(texture_rgb[::-1], dtype=np.uint8).ravel()
+        self.close()  # the GL contexts are re-created on the next render and upload the new texture (rare: re-bakes)
 
     # -- cameras
     def rig(self, pair: str) -> StereoRig:

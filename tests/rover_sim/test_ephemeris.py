@@ -78,3 +78,22 @@ def test_the_rovers_shadow_moves_between_pairs_two_hours_apart():
     rows_early, rows_late = np.nonzero(early)[0], np.nonzero(late)[0]
     assert abs(rows_late.mean() - rows_early.mean()) > 5.0  # and it lies elsewhere in the image
     assert (early & late).sum() < 0.8 * early.sum()
+
+
+def test_the_soils_micro_relief_is_reshaded_when_the_sun_has_moved():
+    sun = {"latitude_deg": -14.57, "solar_longitude_deg": 0.0, "local_solar_time_h": 14.0}
+    sc = scenario_from_dict(FIELD | {"sun": sun, "appearance": {"regolith": "multiscale"}})
+    world = World(sc)
+    try:
+        m = world.renderer.world.model
+        tid = m.texture("terrain_albedo").id
+        span = slice(int(m.tex_adr[tid]), int(m.tex_adr[tid]) + 3 * int(m.tex_width[tid] * m.tex_height[tid]))
+        before = m.tex_data[span].copy()
+        world.render("navcam")  # the sun has not moved: no re-bake
+        np.testing.assert_array_equal(m.tex_data[span], before)
+        world.charge("computing", 1.0 * MARS_HOUR_S)
+        world.render("navcam")
+        changed = np.abs(m.tex_data[span].astype(int) - before).mean()
+    finally:
+        world.close()
+    assert changed > 1.0  # grey levels, mean over the texture
