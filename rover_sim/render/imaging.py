@@ -169,17 +169,29 @@ class ImageFormation:
         """Float luminance at the rasterised resolution -> 12-bit counts (float) at the output resolution."""
         s = self.spec
         native = luma_0_255.shape[0]
-        radiance = luma_0_255.astype(np.float32) / 255.0
         d = self.defects(cam_name, native)
+        lit = luma_0_255.astype(np.float32) * np.float32(1.0 / 255.0)  # radiance r ...
+        lit *= d.flat  # ... through vignetting, dust, gain and PRNU
         if not cam_name.endswith("_right"):  # the left image of a pair (or a single camera) sets the exposure
-            self._exposure = exposure_scale(radiance * d.flat, s)
+            pilot = lit[:: max(1, native // 256), :: max(1, native // 256)]  # histogram of a 256x256 pilot
+            self._exposure = exposure_scale(pilot, s)
         self.last_exposure = self._exposure
         sites = max(1.0, (SENSOR_PX / native) ** 2)  # photosites each rasterised pixel stands for
-        signal_e = radiance * d.flat * (self._exposure * s.full_well_e)
-        sigma_e = np.sqrt(np.maximum(signal_e, 0.0) + s.read_noise_e**2) / np.sqrt(sites)
-        electrons = signal_e + d.dsnu_e + sigma_e * self._rng.standard_normal(signal_e.shape, dtype=np.float32)
-        dn12 = electrons * (DN12_MAX / s.full_well_e)
-        dn12 = np.clip(np.rint(dn12) if sites <= 1.0 else dn12, 0.0, DN12_MAX)
+        signal_e = lit
+        signal_e *= np.float32(self._exposure * s.full_well_e)
+        sigma_e = np.maximum(signal_e, 0.0)
+        sigma_e += np.float32(s.read_noise_e**2)
+        np.sqrt(sigma_e, out=sigma_e)
+        electrons = self._rng.standard_normal(signal_e.shape, dtype=np.float32)
+        electrons *= sigma_e
+        electrons *= np.float32(1.0 / np.sqrt(sites))
+        electrons += signal_e
+        electrons += d.dsnu_e
+        dn12 = electrons
+        dn12 *= np.float32(DN12_MAX / s.full_well_e)
+        if sites <= 1.0:
+            np.rint(dn12, out=dn12)
+        np.clip(dn12, 0.0, DN12_MAX, out=dn12)
         if self.binning > 1:
             h, w = dn12.shape
             b = self.binning
