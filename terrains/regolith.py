@@ -73,12 +73,16 @@ def value_noise(x_m: np.ndarray, y_m: np.ndarray, spacing_m: float, seed: int, l
     fx, fy = gx - ix, gy - iy
     ux, uy = fx * fx * (3.0 - 2.0 * fx), fy * fy * (3.0 - 2.0 * fy)
     lx, ly = int(ix.min()), int(iy.min())
-    table = 2.0 * lattice_uniform(
-        np.arange(lx, int(ix.max()) + 2, dtype=np.int64)[None, :],
-        np.arange(ly, int(iy.max()) + 2, dtype=np.int64)[:, None],
-        seed,
-        layer,
-    ) - 1.0  # corner values on the lattice covering the grid (hashed once per lattice point)
+    table = (
+        2.0
+        * lattice_uniform(
+            np.arange(lx, int(ix.max()) + 2, dtype=np.int64)[None, :],
+            np.arange(ly, int(iy.max()) + 2, dtype=np.int64)[:, None],
+            seed,
+            layer,
+        )
+        - 1.0
+    )  # corner values on the lattice covering the grid (hashed once per lattice point)
     cx, cy = ix - lx, iy - ly
     along_x = table[:, cx] * (1.0 - ux) + table[:, cx + 1] * ux  # (lattice rows, nx)
     out = along_x[cy] * (1.0 - uy)[:, None] + along_x[cy + 1] * uy[:, None]

@@ -97,3 +97,16 @@ def test_the_soils_micro_relief_is_reshaded_when_the_sun_has_moved():
     finally:
         world.close()
     assert changed > 1.0  # grey levels, mean over the texture
+
+
+def test_without_a_time_of_day_the_sun_stays_fixed_and_there_is_no_clock():
+    world = World(scenario_from_dict(FIELD | {"sun": {"azimuth_deg": 100.0, "elevation_deg": 30.0}}))
+    try:
+        m = world.renderer.world.model
+        before = m.light_dir[world.renderer.world.sun_id].copy()
+        world.render("navcam")
+        np.testing.assert_array_equal(m.light_dir[world.renderer.world.sun_id], before)
+        np.testing.assert_allclose(world.sun_direction_world, before / np.linalg.norm(before), atol=1e-6)
+        assert world.clock is None and world.clock_summary() is None
+    finally:
+        world.close()
