@@ -23,10 +23,13 @@ Stage order (issue #16 item 2; the renderer calls :meth:`ImageFormation.form` on
    Gaussian approximation, exact in expectation and variance) and no per-photosite rounding is applied.
 7. **12 -> 8-bit companding**: a square-root lookup table, ``DN8 = round(255 * sqrt(DN12 / 4095))`` (MER converted
    12-bit images to 8 bits with square-root-like LUTs, Maki et al. 2003 §(image processing); shot noise is then
-   about uniform in 8-bit units).
+   about uniform in 8-bit units: a "square-rooter" encodes read and shot noise equally, J. Janesick, CCD-world
+   list, 1998).
 
 Defaults of the ``flight`` profile and where they come from (approximate where marked; the README error budget
-quotes this table):
+quotes this table). The Maki et al. (2003) detector figures (full well, read noise) are quoted from memory of the
+paper's camera table and were not re-checked against the text in this change: verify before quoting them as
+published values.
 
 =========================  ===========  =========================================================================
 term                       default      source
