@@ -15,11 +15,14 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from rover_sim.mission.odometry_spec import OdometryErrorSpec
+
 Profile = Literal["flight", "ideal"]
 DEFAULT_PROFILE: Profile = "ideal"
 
 #: sub-table name -> model class (with ``profile_defaults(profile) -> dict``); filled as error families land
 SUBTABLES: dict[str, type[BaseModel]] = {}
+SUBTABLES["odometry"] = OdometryErrorSpec
 
 
 class SensorsSpec(BaseModel):
@@ -28,6 +31,7 @@ class SensorsSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, validate_default=True)
 
     profile: Profile = Field(DEFAULT_PROFILE, description="'flight' (errors as flown) or 'ideal' (none).")
+    odometry: OdometryErrorSpec = Field(default_factory=OdometryErrorSpec)
 
     @model_validator(mode="before")
     @classmethod
