@@ -115,7 +115,7 @@ def segment_errors_pct(
     drive, the relative-pose translation error over the first ``L`` m of true travel, / ``L``; mean, in %."""
     lengths = [L for L in lengths_m if L < truth.path_length_m()]
     errs = relative_errors(estimate, truth, lengths, step_frames=1) if lengths else []
-    return {f"{e.length_m:g}m": round(e.translation_error_pct, 3) for e in errs if math.isfinite(e.translation_error_pct)}
+    return {f"{e.length_m:g}m": round(e.translation_error_pct, 3) for e in errs if e.n_segments}
 
 
 def rms_position_error_m(estimate: Trajectory, truth: Trajectory) -> float:

@@ -14,6 +14,10 @@ Where each error arises (:mod:`rover_sim.sim.sensors` applies them; the onboard 
   micro-radians), so the mounting dominates.
 * ``gyro_scale_factor_ppm`` / ``accel_scale_factor_ppm``: per-axis scale-factor errors, Litton LN-200 datasheet
   ("scale factor stability" 100 ppm for the gyros, 300 ppm for the accelerometers, 1 sigma).
+* ``sinkage_rolling_radius``: the wheel's effective rolling radius shrinks with its sinkage, ``r - z`` in the slip
+  kinematics of the default (Bekker) soil law (:mod:`rover_sim.sim.terramechanics`; z/r is 1 % in sand at no
+  slip, 2-3 % under slip, 0 on bedrock). It changes the truth (a sunk wheel advances less per turn) while the
+  onboard odometry keeps the nominal radius. The experimental ``wong_reece`` law does not model it.
 * ``heading_error_deg``: the heading of the operator-given start pose (from sun finding) is off by a draw of this
   1 sigma; the truth is not changed. MER sun finding gave heading to about 1.5 deg (Ali et al. 2005, "Attitude and
   position estimation on the Mars Exploration Rovers", as quoted by Wang et al. 2018); we read that as a 3-sigma
@@ -36,6 +40,7 @@ FLIGHT_DEFAULTS: dict[str, float] = {
     "accel_scale_factor_ppm": 300.0,
     "heading_error_deg": 0.5,
 }
+DRAWN = tuple(FLIGHT_DEFAULTS)  # the seeded terms (rover_sim.sim.sensors.OdometryErrors.draw's arguments)
 
 
 class OdometryErrorSpec(BaseModel):
@@ -49,12 +54,18 @@ class OdometryErrorSpec(BaseModel):
     gyro_scale_factor_ppm: float = Field(0.0, ge=0.0, le=1e5, description="1 sigma per axis, ppm.")
     accel_scale_factor_ppm: float = Field(0.0, ge=0.0, le=1e5, description="1 sigma per axis, ppm.")
     heading_error_deg: float = Field(0.0, ge=0.0, le=30.0, description="1 sigma of the start heading, deg.")
+    sinkage_rolling_radius: bool = Field(False, description="Rolling radius r - z (sinkage z), Bekker law only.")
 
     @classmethod
     def profile_defaults(cls, profile: str) -> dict[str, Any]:
-        """The flight sizes (module docstring) or all zeros."""
-        return dict(FLIGHT_DEFAULTS) if profile == "flight" else {k: 0.0 for k in FLIGHT_DEFAULTS}
+        """The flight sizes (module docstring) or all zeros (and the sinkage radius off)."""
+        flight = profile == "flight"
+        return {**(FLIGHT_DEFAULTS if flight else dict.fromkeys(DRAWN, 0.0)), "sinkage_rolling_radius": flight}
+
+    def drawn_sizes(self) -> dict[str, float]:
+        """The 1-sigma sizes of the seeded terms, as keyword arguments of ``OdometryErrors.draw``."""
+        return {k: getattr(self, k) for k in DRAWN}
 
     @property
     def is_ideal(self) -> bool:
-        return all(getattr(self, k) == 0.0 for k in FLIGHT_DEFAULTS)
+        return not self.sinkage_rolling_radius and all(getattr(self, k) == 0.0 for k in DRAWN)

@@ -77,7 +77,10 @@ class World:
         self.point_mast(scenario.nav.mast_pan_deg, scenario.nav.mast_tilt_deg)
         self.sim.step_for(SETTLE_S)
         # [sensors.odometry]: this run's draw of the odometry and attitude errors (none in the ideal profile)
-        self.odometry_errors = OdometryErrors.draw(scenario.seed, **scenario.sensors.odometry.model_dump())
+        odo = scenario.sensors.odometry
+        self.odometry_errors = OdometryErrors.draw(scenario.seed, **odo.drawn_sizes())
+        if odo.sinkage_rolling_radius and hasattr(self.sim.law, "sinkage_rolling_radius"):  # the Bekker law
+            self.sim.law.sinkage_rolling_radius = True
         self.sensors = SensorSuite(self.sim, seed=scenario.seed, errors=self.odometry_errors)  # IMU in the loop
         noise = ImageNoise(seed=scenario.seed) if scenario.nav.image_noise else None
         self.renderer = StereoRenderer(

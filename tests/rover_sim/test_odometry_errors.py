@@ -40,7 +40,7 @@ FLAT = {
 def test_profiles_fill_the_odometry_table():
     assert SensorsSpec(profile="ideal").odometry.is_ideal
     flight = SensorsSpec(profile="flight").odometry
-    assert flight.model_dump() == FLIGHT_DEFAULTS
+    assert flight.drawn_sizes() == FLIGHT_DEFAULTS and flight.sinkage_rolling_radius
     mixed = SensorsSpec.model_validate({"profile": "flight", "odometry": {"heading_error_deg": 2.0}}).odometry
     assert mixed.heading_error_deg == 2.0 and mixed.steer_offset_deg == FLIGHT_DEFAULTS["steer_offset_deg"]
     with pytest.raises(ValueError, match="heading_error_deg"):
@@ -48,7 +48,7 @@ def test_profiles_fill_the_odometry_table():
 
 
 def test_ideal_draws_nothing_and_flight_is_seeded():
-    none = OdometryErrors.draw(7, **SensorsSpec(profile="ideal").odometry.model_dump())
+    none = OdometryErrors.draw(7, **SensorsSpec(profile="ideal").odometry.drawn_sizes())
     assert none == OdometryErrors.none()
     a = OdometryErrors.draw(7, **FLIGHT_DEFAULTS)
     b = OdometryErrors.draw(7, **FLIGHT_DEFAULTS)
