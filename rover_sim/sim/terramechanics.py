@@ -140,8 +140,8 @@ class WheelSoilLaw:
     ) -> None:
         self.radius_m = radius_m
         # rolling radius r - z (issue #16): a sunk wheel advances (r - z) per radian, not r, so the wheel odometry
-        # (nominal r) over-counts by z / r (1-3 % in sand). Off by default (today's law); [sensors.odometry]
-        # sinkage_rolling_radius turns it on (the flight profile).
+        # (nominal r) over-counts by z / r (about 5 % in the sim's sand). Off by default (today's law, on which the
+        # slip anchors were calibrated); [sensors.odometry] sinkage_rolling_radius = true turns it on.
         self.sinkage_rolling_radius = False
         self.mass_share_kg = mass_share_kg  # vehicle mass per wheel, for the bristle damping
         self.width_m = width_m

@@ -40,7 +40,7 @@ FLAT = {
 def test_profiles_fill_the_odometry_table():
     assert SensorsSpec(profile="ideal").odometry.is_ideal
     flight = SensorsSpec(profile="flight").odometry
-    assert flight.drawn_sizes() == FLIGHT_DEFAULTS and flight.sinkage_rolling_radius
+    assert flight.drawn_sizes() == FLIGHT_DEFAULTS and not flight.sinkage_rolling_radius  # opt-in (not small)
     mixed = SensorsSpec.model_validate({"profile": "flight", "odometry": {"heading_error_deg": 2.0}}).odometry
     assert mixed.heading_error_deg == 2.0 and mixed.steer_offset_deg == FLIGHT_DEFAULTS["steer_offset_deg"]
     with pytest.raises(ValueError, match="heading_error_deg"):

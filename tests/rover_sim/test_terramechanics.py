@@ -123,7 +123,7 @@ def test_sinkage_rolling_radius_turns_nominal_rolling_into_braking_in_sand_only(
     sunk.sinkage_rolling_radius = True
     assert _steady_traction(sunk, 0.0) < _steady_traction(nominal, 0.0)
     z = sunk.state.sinkage_m[0]
-    assert 0.0 < z < 0.05 * sunk.radius_m  # small: about 1 % of the radius in sand
+    assert 0.0 < z < 0.1 * sunk.radius_m
     assert sunk.state.slip[0] == pytest.approx(-z / (sunk.radius_m - z), rel=0.05)
     rock, sunk_on_rock = MATERIALS.index(BEDROCK), _one_wheel()
     sunk_on_rock.sinkage_rolling_radius = True
