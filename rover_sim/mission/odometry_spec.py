@@ -58,7 +58,7 @@ class OdometryErrorSpec(BaseModel):
     gyro_scale_factor_ppm: float = Field(0.0, ge=0.0, le=1e5, description="1 sigma per axis, ppm.")
     accel_scale_factor_ppm: float = Field(0.0, ge=0.0, le=1e5, description="1 sigma per axis, ppm.")
     heading_error_deg: float = Field(0.0, ge=0.0, le=30.0, description="1 sigma of the start heading, deg.")
-    sinkage_rolling_radius: bool = Field(False, description="Rolling radius r - z (sinkage z), Bekker law only; opt-in.")
+    sinkage_rolling_radius: bool = Field(False, description="Rolling radius r - z, Bekker law only; opt-in.")
 
     @classmethod
     def profile_defaults(cls, profile: str) -> dict[str, Any]:

@@ -117,8 +117,8 @@ def test_bedrock_params_are_stiffer_than_sand():
 
 def test_sinkage_rolling_radius_turns_nominal_rolling_into_braking_in_sand_only():
     """[sensors.odometry] sinkage_rolling_radius: a wheel sunk z rolls on r - z, so a hub moving at r omega (no
-    slip by the nominal radius) outruns its rolling speed omega (r - z): the soil brakes it and the slip ratio it
-    reports is negative, about -z / (r - z). On bedrock (sinkage below 0.5 mm) the effect is a few tenths of a percent."""
+    slip by the nominal radius) outruns its rolling speed omega (r - z): the soil brakes it and the slip ratio
+    it reports is negative, about -z / (r - z). On bedrock (sinkage below 0.5 mm) it is a few tenths of a %."""
     nominal, sunk = _one_wheel(), _one_wheel()
     sunk.sinkage_rolling_radius = True
     assert _steady_traction(sunk, 0.0) < _steady_traction(nominal, 0.0)
