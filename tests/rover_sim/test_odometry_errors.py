@@ -147,3 +147,37 @@ def test_flight_dead_reckoning_is_worse_than_ideal_but_within_the_mer_goal(tmp_p
     assert flight.dr_error_pct <= 10.0
     assert flight.rms_position_error_m["dead_reckoning"] > ideal.rms_position_error_m["dead_reckoning"]
     assert flight.kitti_segment_error_pct["vo"] is None and "1m" in flight.kitti_segment_error_pct["dead_reckoning"]
+
+
+def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_path, monkeypatch, capsys):
+    """Profile plumbing of `bench suite` with the missions stubbed out: each profile's rows are tagged, the table
+    says which profile, the baseline gate judges only the baseline profile's run, --update-baseline stores it."""
+    import json
+
+    from rover_sim.bench import missions
+    from rover_sim.mission.evaluator import Metrics
+
+    seen = []
+
+    def fake_run(name, out_dir, record, overrides):
+        profile = next(o for o in overrides if o.startswith("sensors.profile=")).split("=")[1].strip('"')
+        seen.append(profile)
+        dr = 5.0 if profile == "flight" else 1.0  # far from the stored baseline on flight only
+        return Metrics(name, 0, 3.0, dr, 0.2, 100.0, 4.0, 2.0, True, "all criteria met", 1.0,
+                       kitti_segment_error_pct={"vo": {"1m": 1.0}, "dead_reckoning": {"1m": dr}},
+                       rms_position_error_m={"vo": 0.01, "dead_reckoning": 0.05})  # fmt: skip
+
+    monkeypatch.setattr(missions, "run_scenario", fake_run)
+    monkeypatch.setattr(missions, "catalogue", lambda: ["wopmay"])
+    base = tmp_path / "base.json"
+    base.write_text(json.dumps({"wopmay": {"dr_error_pct": 1.0, "vo_error_pct": 0.2, "vo_convergence_pct": 100.0}}))
+    rows, ok = missions.bench_suite(None, out_root=tmp_path, baseline_path=base, update_baseline=True)
+    assert seen == ["flight", "ideal"] and ok
+    assert [r["profile"] for r in rows] == ["flight", "ideal"] and not any(r["regressions"] for r in rows)
+    out = capsys.readouterr().out
+    assert "sensors profile: flight" in out and "sensors profile: ideal (gated against the baseline)" in out
+    assert "| wopmay | 3.00 | 4.00 | 5.00 | 0.20 | 5.00 / - / - | 1.00 / - / - | 0.05 / 0.01 |" in out
+    assert json.loads(base.read_text())["wopmay"]["dr_error_pct"] == 1.0  # the ideal run was stored, not the flight one
+    seen.clear()
+    missions.bench_suite(None, fast=True, out_root=tmp_path, baseline_path=base, profiles=None)
+    assert seen == [missions.BASELINE_PROFILE]
