@@ -55,6 +55,11 @@ def profile_overrides(profile: Profile) -> list[str]:
     return [f'sensors.profile="{profile}"']
 
 
+def _metres(v: float | None) -> str:
+    """An RMS error in metres to the millimetre (``-`` when not measured)."""
+    return "-" if v is None else f"{v:.3f}"
+
+
 def _segments(d: dict | None) -> str:
     """``{"1m": a, "5m": b, "10m": c}`` as ``a / b / c`` (``-`` where the drive was too short)."""
     if not d:
@@ -163,7 +168,7 @@ def bench_vo(
                 f"| {label} | {r['profile']} | {r['vo_update']} | {case} | {_fmt(r['distance_m'])} | "
                 f"{_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | "
                 f"{_segments(seg.get('dead_reckoning'))} | {_segments(seg.get('vo'))} | "
-                f"{_fmt(rms.get('dead_reckoning'))} / {_fmt(rms.get('vo'))} | {_fmt(r['vo_convergence_pct'])} | "
+                f"{_metres(rms.get('dead_reckoning'))} / {_metres(rms.get('vo'))} | {_fmt(r['vo_convergence_pct'])} | "
                 f"{r['false_positives']} | {_fmt(r['vo_step_ms_median'])} | {accept} | "
                 f"{'yes' if r['passed'] else 'NO'} |"
             )
@@ -307,7 +312,7 @@ def bench_suite(
             print(
                 f"| {r['scenario']} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | "
                 f"{_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | {_segments(seg.get('dead_reckoning'))} | "
-                f"{_segments(seg.get('vo'))} | {_fmt(rms.get('dead_reckoning'))} / {_fmt(rms.get('vo'))} | "
+                f"{_segments(seg.get('vo'))} | {_metres(rms.get('dead_reckoning'))} / {_metres(rms.get('vo'))} | "
                 f"{_fmt(r['vo_convergence_pct'])} | {'yes' if good else 'NO'} | {note} |"
             )
     write_json(json_path, rows)

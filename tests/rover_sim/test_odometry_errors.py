@@ -176,7 +176,7 @@ def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_
     assert [r["profile"] for r in rows] == ["flight", "ideal"] and not any(r["regressions"] for r in rows)
     out = capsys.readouterr().out
     assert "sensors profile: flight" in out and "sensors profile: ideal (gated against the baseline)" in out
-    assert "| wopmay | 3.00 | 4.00 | 5.00 | 0.20 | 5.00 / - / - | 1.00 / - / - | 0.05 / 0.01 |" in out
+    assert "| wopmay | 3.00 | 4.00 | 5.00 | 0.20 | 5.00 / - / - | 1.00 / - / - | 0.050 / 0.010 |" in out
     assert json.loads(base.read_text())["wopmay"]["dr_error_pct"] == 1.0  # the ideal run was stored, not the flight one
     seen.clear()
     missions.bench_suite(None, fast=True, out_root=tmp_path, baseline_path=base, profiles=None)
