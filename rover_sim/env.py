@@ -280,7 +280,7 @@ class RoverEnv(gymnasium.Env):
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict, dict]:
         from nav.types import RoverGeometry
-        from rover_sim.sim.sensors import SensorSuite
+        from rover_sim.sim.sensors import OdometryErrors, SensorSuite
 
         super().reset(seed=seed)
         rng = self.np_random
@@ -301,7 +301,11 @@ class RoverEnv(gymnasium.Env):
         self._mast = np.array([math.radians(sc.nav.mast_pan_deg), math.radians(sc.nav.mast_tilt_deg)])
         sim.set_mast(self._mast[0], -self._mast[1])  # the tilt joint turns about +y: -elevation
         sim.step_for(1.0)
-        self._sensors = SensorSuite(sim, seed=sensor_seed)
+        odo = sc.sensors.odometry  # [sensors.odometry] (issue #16): none in the ideal profile
+        if hasattr(sim.law, "sinkage_rolling_radius"):
+            sim.law.sinkage_rolling_radius = odo.sinkage_rolling_radius
+        errors = OdometryErrors.draw(sensor_seed, **odo.drawn_sizes())
+        self._sensors = SensorSuite(sim, seed=sensor_seed, errors=errors)
         self._renderer.reseed_noise(noise_seed if self.image_noise else None)
         if self._goal is not None:
             yaw = math.radians(st.yaw_deg)

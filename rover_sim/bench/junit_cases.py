@@ -45,9 +45,12 @@ def mobility_cases(result: dict) -> list[Case]:
 
 
 def vo_cases(results: dict) -> list[Case]:
-    """One case per VO case for MER VO, and per case for each plugin (classname ``bench.vo.<plugin>``)."""
+    """One case per VO case for MER VO (flight profile), and per case for each plugin (``bench.vo.<plugin>``);
+    the ideal-profile and full-pose comparison runs are reported, not judged."""
+    from rover_sim.bench.missions import COMPARISON_KEYS
+
     out = [
-        scenario_case(r, "bench.vo.builtin", case_name) for case_name, r in results.items() if case_name != "plugins"
+        scenario_case(r, "bench.vo.builtin", name) for name, r in results.items() if name not in COMPARISON_KEYS
     ]
     for plugin, per in results.get("plugins", {}).items():
         out += [scenario_case(r, f"bench.vo.{plugin}", case_name) for case_name, r in per.items()]

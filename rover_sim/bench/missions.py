@@ -3,6 +3,13 @@
 Each case is a full closed-loop mission (physics, rendering, sensors, nav stack), deterministic for its seed.
 The suite compares every metric with the committed baseline (``benchmarks/suite_baseline.json``) and fails on a
 scenario that misses its own pass criterion or on a regression past the tolerances below.
+
+Sensor profiles (issue #16): benchmarks measure the ``flight`` profile (:data:`BENCH_PROFILE`) and, beside it,
+the ``ideal`` one; every table and every JSON case says which. ``bench vo`` runs each case on flight, on ideal,
+and on flight with the full-pose VO update (``--quick``: flight only). ``bench suite`` runs both profiles; with
+``--fast`` (the CI gate) only the profile the committed baseline was recorded on (:data:`BASELINE_PROFILE`), so
+the gate keeps its meaning and its few minutes. The regression gate always compares the run of
+:data:`BASELINE_PROFILE` with the baseline, and ``--update-baseline`` stores that run.
 """
 
 from __future__ import annotations
@@ -16,6 +23,7 @@ from rover_sim.bench import write_json
 from rover_sim.mission import acceptance
 from rover_sim.mission.run import Metrics, run_scenario
 from rover_sim.mission.scenario import Scenario, catalogue, load_scenario, plugin_overrides, scenario_from_dict
+from rover_sim.mission.sensors_spec import Profile
 from rover_sim.resources import suite_baseline_path
 
 BASELINE = suite_baseline_path()
@@ -30,12 +38,33 @@ CONVERGENCE_SLACK_PCT = 5.0  # VO convergence may drop by this many points
 REL_TOLERANCE = 0.10  # --baseline FILE: a metric may get this much worse, relative to the file's value
 ABS_FLOOR_PCT = 0.05  # ... plus this (percentage points), so a baseline of 0 does not fail on noise
 
+BENCH_PROFILE: Profile = "flight"  # what the benchmarks measure first (issue #16)
+BASELINE_PROFILE: Profile = "ideal"  # the profile benchmarks/suite_baseline.json was recorded on
+
 VO_CASES = {
     "msstb": "msstb_rock_course",
     "slope30m": "slope30m",
     "featureless": "meridiani_plains",
     "shadow": "sol235_shadow",
+    "flat": "flat_benign",
 }
+
+
+def profile_overrides(profile: Profile) -> list[str]:
+    """``--set`` overrides that select a sensor profile."""
+    return [f'sensors.profile="{profile}"']
+
+
+def _metres(v: float | None) -> str:
+    """An RMS error in metres to the millimetre (``-`` when not measured)."""
+    return "-" if v is None else f"{v:.3f}"
+
+
+def _segments(d: dict | None) -> str:
+    """``{"1m": a, "5m": b, "10m": c}`` as ``a / b / c`` (``-`` where the drive was too short)."""
+    if not d:
+        return "-"
+    return " / ".join(_fmt(d.get(k)) for k in ("1m", "5m", "10m"))
 
 
 def _fmt(v) -> str:
@@ -50,9 +79,14 @@ def _as_scenario(scenario: str | Scenario, overrides: list[str] | None = None) -
     return load_scenario(scenario, overrides)
 
 
-def _vo_case(scenario: str | Scenario, out_dir: Path, overrides: list[str]) -> dict:
-    m = run_scenario(_as_scenario(scenario, overrides), out_dir, record=False)
+def _vo_case(scenario: str | Scenario, out_dir: Path, overrides: list[str], profile: Profile = BENCH_PROFILE) -> dict:
+    sc = _as_scenario(scenario, overrides + profile_overrides(profile))
+    m = run_scenario(sc, out_dir, record=False)
     return {
+        "profile": profile,
+        "vo_update": sc.nav.vo.update,
+        "kitti_segment_error_pct": m.kitti_segment_error_pct,
+        "rms_position_error_m": m.rms_position_error_m,
         "distance_m": m.distance_m,
         "dr_error_pct": m.dr_error_pct,
         "vo_error_pct": m.vo_error_pct,
@@ -83,43 +117,58 @@ def bench_vo(
     plugins: list[str] | None = None,
     cases: list[str] | None = None,
     case_scenarios: dict[str, str | Scenario] | None = None,
+    quick: bool = False,
 ) -> dict:
-    """The issue's VO cases with MER VO, then with each plugin VO (``plugins``: import paths or entry-point names);
-    prints one table with the acceptance (each scenario's own ``[pass]``) beside the measurements.
+    """The issue's VO cases with MER VO on the flight profile, then with each plugin VO (``plugins``: import paths
+    or entry-point names); unless ``quick``, MER VO again on the ideal profile (top-level ``"ideal"``) and on the
+    flight profile with the full-pose VO update (top-level ``"full_pose"``). Prints one table with the acceptance
+    (each scenario's own ``[pass]``, judged on the flight run) beside the measurements.
     ``case_scenarios`` replaces the case list (case name -> scenario name or TOML path), e.g. for a quick check."""
     all_cases = case_scenarios if case_scenarios is not None else VO_CASES
     chosen = {c: s for c, s in all_cases.items() if cases is None or c in cases}
-    jobs = [("MER VO (builtin)", None, case) for case in chosen]
-    jobs += [(plugin, plugin, case) for plugin in plugins or [] for case in chosen]
+    builtin = "MER VO (builtin)"
+    # (table label, result dict key path, profile, extra overrides)
+    variants = [(builtin, (), BENCH_PROFILE, [])]
+    if not quick:
+        variants += [
+            (builtin, ("ideal",), "ideal", []),
+            (f"{builtin}, full-pose update", ("full_pose",), BENCH_PROFILE, ['nav.vo.update="full_pose"']),
+        ]
+    variants += [(p, ("plugins", p), BENCH_PROFILE, plugin_overrides(vo=p)) for p in plugins or []]
+    jobs = [(v, case) for v in variants for case in chosen]
     results: dict = {}
-    runs: dict = {"MER VO (builtin)": results}
+    runs: list[tuple[str, dict]] = []
     with _bar(len(jobs), "bench vo") as bar:
-        for vo_name, plugin, case in jobs:
-            bar.set_postfix_str(f"{vo_name}: {case}")
-            if plugin is None:
-                per, r = results, _vo_case(chosen[case], out_root / case, [])
-            else:
-                per = results.setdefault("plugins", {}).setdefault(plugin, {})
-                runs[plugin] = per
-                r = _vo_case(chosen[case], out_root / "plugins" / plugin.replace(":", "_") / case,
-                             plugin_overrides(vo=plugin))  # fmt: skip
+        for (label, keys, profile, extra), case in jobs:
+            bar.set_postfix_str(f"{label} ({profile}): {case}")
+            per = results
+            for k in keys:
+                per = per.setdefault(k, {})
+            if not runs or runs[-1][1] is not per:
+                runs.append((label, per))
+            sub = out_root.joinpath(*(k.replace(":", "_") for k in keys), case)
+            r = _vo_case(chosen[case], sub, extra, profile)
             per[case] = r
             bar.update()
             if interrupts.was_interrupted(r["reason"]):
                 break  # Ctrl-C / SIGTERM: report what ran (the CLI exits 130 / 143)
     print(
-        "| VO | case | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | false pos. "
+        "| VO | profile | VO update | case | distance (m) | max slip (%) | DR error (%) | VO error (%) "
+        "| DR segments 1/5/10 m (%) | VO segments 1/5/10 m (%) | RMS DR / VO (m) | VO convergence (%) | false pos. "
         "| VO ms/step | acceptance | pass |"
     )
-    print("|---|---|---:|---:|---:|---:|---:|---:|---:|---|:-:|")
-    for vo_name, per in runs.items():
+    print("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|:-:|")
+    for label, per in runs:
         for case, r in per.items():
-            if case == "plugins":
+            if case not in chosen:
                 continue
             accept = acceptance.describe(_as_scenario(chosen[case]).passing)
+            seg, rms = r["kitti_segment_error_pct"], r["rms_position_error_m"]
             print(
-                f"| {vo_name} | {case} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | "
-                f"{_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | "
+                f"| {label} | {r['profile']} | {r['vo_update']} | {case} | {_fmt(r['distance_m'])} | "
+                f"{_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | "
+                f"{_segments(seg.get('dead_reckoning'))} | {_segments(seg.get('vo'))} | "
+                f"{_metres(rms.get('dead_reckoning'))} / {_metres(rms.get('vo'))} | {_fmt(r['vo_convergence_pct'])} | "
                 f"{r['false_positives']} | {_fmt(r['vo_step_ms_median'])} | {accept} | "
                 f"{'yes' if r['passed'] else 'NO'} |"
             )
@@ -127,9 +176,12 @@ def bench_vo(
     return results
 
 
+COMPARISON_KEYS = ("plugins", "ideal", "full_pose")  # bench vo top-level keys that are not flight cases
+
+
 def all_passed(results: dict) -> bool:
     """Every case of the built-in and of every plugin met its criteria."""
-    ok = all(r["passed"] for c, r in results.items() if c != "plugins")
+    ok = all(r["passed"] for c, r in results.items() if c not in COMPARISON_KEYS)
     for per in results.get("plugins", {}).values():
         ok &= all(r["passed"] for r in per.values())
     return ok
@@ -191,7 +243,8 @@ def load_baseline(path: Path) -> dict:
     except ValueError as e:
         raise ConfigError(str(path), "(syntax)", f"not valid JSON: {e}") from None
     if isinstance(data, list) and all(isinstance(r, dict) and "scenario" in r for r in data):
-        return {r["scenario"]: r for r in data}
+        # rows of several profiles: keep the baseline profile's (older files have no "profile")
+        return {r["scenario"]: r for r in data if r.get("profile", BASELINE_PROFILE) == BASELINE_PROFILE}
     if isinstance(data, dict) and all(isinstance(v, dict) for v in data.values()):
         return data
     raise ConfigError(str(path), "(top level)", "expected {scenario: {metric: value}} or a bench suite --json list")
@@ -206,11 +259,17 @@ def bench_suite(
     label: str = "builtin",
     baseline_path: Path | None = None,
     tolerance: float = REL_TOLERANCE,
+    profiles: tuple[Profile, ...] | None = None,
 ) -> tuple[list[dict], bool]:
-    """Run the catalogue (``fast``: the CI subset), with ``overrides`` (e.g. a plugin VO); markdown table;
-    (rows, ok). The committed baseline's regression check applies to the built-in stack only
+    """Run the catalogue (``fast``: the CI subset), with ``overrides`` (e.g. a plugin VO), on each sensor profile of
+    ``profiles`` (default: flight and ideal; with ``fast`` only :data:`BASELINE_PROFILE`); one markdown table per
+    profile; (rows, ok), each row tagged with its ``"profile"``. The baseline gate judges the
+    :data:`BASELINE_PROFILE` run only: the committed baseline's regression check applies to the built-in stack
     (``label == "builtin"``); a ``baseline_path`` (the user's own) is checked with relative ``tolerance`` for any
     stack, and ``update_baseline`` then writes that file. Ctrl-C / SIGTERM stops after the interrupted scenario."""
+    if profiles is None:
+        profiles = (BASELINE_PROFILE,) if fast else (BENCH_PROFILE, "ideal")
+    profiles = tuple(dict.fromkeys(profiles))
     names = [n for n in catalogue() if not fast or load_scenario(n).fast]
     own = baseline_path is not None
     store = Path(baseline_path) if own else BASELINE
@@ -220,35 +279,48 @@ def bench_suite(
 
         raise ConfigError(str(store), "(file)", "no such baseline file (create it with --update-baseline)")
     rows, ok = [], True
-    with _bar(len(names), f"bench suite ({label})") as bar:
-        for name in names:
-            bar.set_postfix_str(name)
-            m = run_scenario(name, out_root / label.replace(":", "_") / name, record=False, overrides=overrides or [])
-            if own:
+    jobs = [(profile, name) for profile in profiles for name in names]
+    with _bar(len(jobs), f"bench suite ({label})") as bar:
+        for profile, name in jobs:
+            bar.set_postfix_str(f"{profile}: {name}")
+            out_dir = out_root / label.replace(":", "_") / profile / name
+            m = run_scenario(name, out_dir, record=False, overrides=(overrides or []) + profile_overrides(profile))
+            if profile != BASELINE_PROFILE:
+                regress = []
+            elif own:
                 regress = relative_regressions(m, baseline.get(name), tolerance)
             else:
                 regress = _regressions(m, baseline.get(name)) if label == "builtin" else []
-            row = m.deterministic_dict() | {"timing": m.timing, "regressions": regress}
+            row = m.deterministic_dict() | {"profile": profile, "timing": m.timing, "regressions": regress}
             rows.append(row)
             ok &= m.passed and not regress
             bar.update()
             if interrupts.was_interrupted(m.reason):
                 break
-    print(f"stack: {label}")
-    print("| scenario | distance (m) | max slip (%) | DR error (%) | VO error (%) | VO convergence (%) | pass | note |")
-    print("|---|---:|---:|---:|---:|---:|:-:|---|")
-    for r in rows:
-        good = r["passed"] and not r["regressions"]
-        note = "; ".join(r["regressions"]) or r["reason"]
+    for profile in profiles:
+        gate = " (gated against the baseline)" if profile == BASELINE_PROFILE else ""
+        print(f"stack: {label}, sensors profile: {profile}{gate}")
         print(
-            f"| {r['scenario']} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | "
-            f"{_fmt(r['vo_error_pct'])} | {_fmt(r['vo_convergence_pct'])} | {'yes' if good else 'NO'} | {note} |"
+            "| scenario | distance (m) | max slip (%) | DR error (%) | VO error (%) | DR segments 1/5/10 m (%) "
+            "| VO segments 1/5/10 m (%) | RMS DR / VO (m) | VO convergence (%) | pass | note |"
         )
+        print("|---|---:|---:|---:|---:|---:|---:|---:|---:|:-:|---|")
+        for r in (r for r in rows if r["profile"] == profile):
+            good = r["passed"] and not r["regressions"]
+            note = "; ".join(r["regressions"]) or r["reason"]
+            seg, rms = r["kitti_segment_error_pct"], r["rms_position_error_m"]
+            print(
+                f"| {r['scenario']} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | "
+                f"{_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | {_segments(seg.get('dead_reckoning'))} | "
+                f"{_segments(seg.get('vo'))} | {_metres(rms.get('dead_reckoning'))} / {_metres(rms.get('vo'))} | "
+                f"{_fmt(r['vo_convergence_pct'])} | {'yes' if good else 'NO'} | {note} |"
+            )
     write_json(json_path, rows)
     complete = not any(interrupts.was_interrupted(r["reason"]) for r in rows)
-    if update_baseline and (label == "builtin" or own) and complete:
+    gated = [r for r in rows if r["profile"] == BASELINE_PROFILE]
+    if update_baseline and (label == "builtin" or own) and complete and gated:
         keep = ("vo_error_pct", "vo_convergence_pct", "false_positives", "dr_error_pct", "max_slip_pct")
-        merged = baseline | {r["scenario"]: {k: r[k] for k in keep} for r in rows}
+        merged = baseline | {r["scenario"]: {k: r[k] for k in keep} for r in gated}
         store.parent.mkdir(parents=True, exist_ok=True)
         store.write_text(json.dumps(merged, indent=2, sort_keys=True) + "\n")
     return rows, ok

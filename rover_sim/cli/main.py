@@ -235,9 +235,14 @@ def bench_vo_cmd(
         list[str] | None, typer.Option("--vo", help=f"Also run this visual odometer ({_IMPL}); repeatable.")
     ] = None,
     case: Annotated[list[str] | None, typer.Option("--case", help="Only these cases (repeatable).")] = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Flight profile only: skip the ideal-profile and full-pose VO reruns.")
+    ] = False,
     junit: JunitOpt = None,
 ) -> None:
-    """VO cases: MSSTB rock course, 30 m slope, featureless soil, rover shadow; MER VO beside any --vo plugins."""
+    """VO cases: MSSTB rock course, 30 m slope, featureless soil, rover shadow, flat benign ground; MER VO beside
+    any --vo plugins. Each case runs on the flight sensor profile, and (unless --quick) again on the ideal profile
+    and with the full-pose VO update; the tables say which."""
     from rover_sim.bench.missions import VO_CASES
 
     for c in case or []:
@@ -247,7 +252,7 @@ def bench_vo_cmd(
         from rover_sim.bench.junit_cases import vo_cases
         from rover_sim.bench.missions import bench_vo
 
-        results = bench_vo(str(json) if json else None, plugins=vo or None, cases=case or None)
+        results = bench_vo(str(json) if json else None, plugins=vo or None, cases=case or None, quick=quick)
     finish(junit, "bench vo", vo_cases(results))
 
 
@@ -269,8 +274,19 @@ def bench_suite_cmd(
     tolerance: Annotated[
         float, typer.Option("--tolerance", min=0.0, max=10.0, help="Relative tolerance for --baseline.")
     ] = 0.10,
+    profile: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--profile",
+            help="Sensor profile(s) to run, flight or ideal (repeatable); default both, with --fast only the "
+            "profile the baseline was recorded on.",
+        ),
+    ] = None,
 ) -> None:
     """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline.
+
+    Sensor profiles: each scenario runs on the flight and the ideal profile (--fast: only the baseline's profile,
+    the CI gate); the baseline gates the run on the profile it was recorded on.
 
     With --vo/--stereo/--planner the catalogue runs a second time with those parts swapped in, and both tables
     print (the plugin stack is judged by each scenario's criteria; the baseline gates the built-in stack).
@@ -280,13 +296,17 @@ def bench_suite_cmd(
 
     if update_baseline and baseline is None and source_checkout() is None:
         _fail(ValueError("--update-baseline outside a source checkout needs --baseline PATH (the file to write)"))
+    for p in profile or []:
+        if p not in ("flight", "ideal"):
+            _fail(ValueError(f"--profile {p!r}: choose flight or ideal"))
     path = str(json) if json else None
     with guarded():
         from rover_sim.bench.junit_cases import suite_cases
         from rover_sim.bench.missions import bench_suite
         from rover_sim.mission.scenario import plugin_overrides
 
-        kw = {"fast": fast, "baseline_path": baseline, "tolerance": tolerance}
+        profiles = tuple(profile) if profile else None
+        kw = {"fast": fast, "baseline_path": baseline, "tolerance": tolerance, "profiles": profiles}
         rows, _ = bench_suite(path, update_baseline=update_baseline, **kw)
         cases = suite_cases(rows)
         overrides = plugin_overrides(vo, stereo, planner)

@@ -35,6 +35,8 @@ MIN_SLIP_TRAVEL_M = 0.05  # steps commanding less travel than this (turns in pla
 # errors as a percentage of distance need a distance: below this path length (a mast-only run, a zero-length drive,
 # a turn in place) the *_error_pct metrics are None (not measured) and only the errors in metres are reported
 MIN_DISTANCE_FOR_PCT_M = 0.1
+# KITTI-style segment lengths of travelled distance (issue #16); a length is scored only when the drive is longer
+SEGMENT_LENGTHS_M = (1.0, 5.0, 10.0)
 
 
 @dataclass
@@ -87,6 +89,11 @@ class Metrics:
     tall_rock_contacts: int = 0  # ticks with any rover geom touching a rock >= TALL_ROCK_M tall
     goal_distance_m: float | None = None
     sim_s: float = 0.0
+    # issue #16, errors that do not hide: {"vo"|"dead_reckoning": {"1m": %, "5m": %, "10m": %}} (segments of
+    # travelled distance, mean over every start record; "vo" None without VO) and the RMS of the position error
+    # over every record of the drive (8 Hz, between VO updates too)
+    kitti_segment_error_pct: dict = field(default_factory=dict)
+    rms_position_error_m: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
     # wall-clock measurements: not deterministic, so written to timing.json rather than metrics.json
     timing: dict = field(default_factory=dict)
@@ -99,6 +106,22 @@ class Metrics:
         d = asdict(self)
         d.pop("timing")
         return d
+
+
+def segment_errors_pct(
+    estimate: Trajectory, truth: Trajectory, lengths_m: tuple[float, ...] = SEGMENT_LENGTHS_M
+) -> dict[str, float]:
+    """KITTI odometry metric (Geiger et al. 2012): for every start record and each length ``L`` shorter than the
+    drive, the relative-pose translation error over the first ``L`` m of true travel, / ``L``; mean, in %."""
+    lengths = [L for L in lengths_m if L < truth.path_length_m()]
+    errs = relative_errors(estimate, truth, lengths, step_frames=1) if lengths else []
+    return {f"{e.length_m:g}m": round(e.translation_error_pct, 3) for e in errs if e.n_segments}
+
+
+def rms_position_error_m(estimate: Trajectory, truth: Trajectory) -> float:
+    """Root mean square of ``|p_est - p_true|`` over every record (the sawtooth between VO updates included)."""
+    d = np.linalg.norm(estimate.positions_xyz - truth.positions_xyz, axis=1)
+    return round(float(np.sqrt(np.mean(d * d))), 4)
 
 
 def window_slips(truth: list[Pose], commanded_m: list[float], window_m: float = SLIP_WINDOW_M) -> np.ndarray:
@@ -260,6 +283,12 @@ class Evaluator:
             if self.goal_xy is not None
             else None,
             sim_s=round(sim_s, 2),
+            kitti_segment_error_pct={
+                k: segment_errors_pct(tr[k], truth) if k in tr else None for k in ("vo", "dead_reckoning")
+            },
+            rms_position_error_m={
+                k: rms_position_error_m(tr[k], truth) if k in tr else None for k in ("vo", "dead_reckoning")
+            },
             extra={"kitti_translation_error_pct": self.kitti()} | extra,
             timing={"vo_step_ms_median": round(float(np.median(ms)), 1) if ms else None} | timing,
         )

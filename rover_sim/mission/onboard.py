@@ -3,16 +3,19 @@
 Every entry point takes an :class:`~rover_sim.mission.observation.Observation` and refuses anything else, so the
 honesty rule is a type, not a convention. Nothing here imports the simulator, the renderer or the evaluator.
 
-- :meth:`Onboard.observe`: IMU samples since the last encoder reading + the new reading -> two dead reckoners
-  (one pure wheel/IMU for comparison, one that VO corrects: the pose the rover drives on).
+- :meth:`Onboard.observe`: each encoder reading with the IMU samples up to it -> two dead reckoners (one pure
+  wheel/IMU for comparison, one that VO corrects: the pose the rover drives on), at the encoders' 8 Hz.
 - :meth:`Onboard.vo_step`: one stereo pair -> VO (seed 000 section 2) -> an accepted motion replaces the
   dead-reckoned increment since the previous pair (MER practice); a refusal leaves dead reckoning standing.
+  ``vo_update = "position"`` (MER's default, Ali et al. 2005) replaces the position only and keeps the IMU's
+  attitude; ``"full_pose"`` takes VO's attitude too.
 - :meth:`Onboard.plan`: hazcam pair(s) -> stereo range image -> points placed with the onboard pose -> GESTALT
   (seed 001 section 4) -> the arc to drive.
 """
 
 from __future__ import annotations
 
+import bisect
 import inspect
 import math
 import time
@@ -40,6 +43,7 @@ MAX_RANGE_M = 3.5
 # plan-view box (rover frame, |x| and |y| below these) are the vehicle, not terrain.
 SELF_MASK_HALF_LENGTH_M = 0.85
 SELF_MASK_HALF_WIDTH_M = 0.8
+IMU_TIME_TOL_S = 1e-9  # an IMU sample taken with an encoder reading (same instant) belongs to its update
 
 
 def terrain_points(points_rover: np.ndarray) -> np.ndarray:
@@ -100,7 +104,11 @@ class Onboard:
         planner_factory: Callable[[], Planner],
         geometry: RoverGeometry | None = None,
         shape: RoverShape | None = None,
+        vo_update: str = "position",
     ) -> None:
+        if vo_update not in ("position", "full_pose"):
+            raise ValueError(f"[nav.vo] update = {vo_update!r}: allowed values are 'position' and 'full_pose'")
+        self.vo_update = vo_update
         self.geometry = geometry or RoverGeometry()
         self.shape = shape  # design data for the shadow prediction (None: no shadow masking)
         self.dead_reckoning = DeadReckoner(self.geometry, start_pose)  # wheels + IMU only, for comparison
@@ -123,10 +131,11 @@ class Onboard:
         """Fold in the IMU and encoder samples of ``obs``; returns the onboard pose."""
         obs = require_observation(obs, "Onboard.observe")
         self._imu_pending.extend(obs.imu)
-        if obs.encoders:  # 8 Hz pose update: the IMU samples since the last encoder reading plus the new reading
-            self.dead_reckoning.update(self._imu_pending, obs.encoders[-1])
-            self.estimator.update(self._imu_pending, obs.encoders[-1])
-            self._imu_pending = []
+        for enc in obs.encoders:  # 8 Hz pose updates: each reading with the IMU samples taken up to it
+            n = bisect.bisect_right([s.t_s for s in self._imu_pending], enc.t_s + IMU_TIME_TOL_S)
+            upto, self._imu_pending = self._imu_pending[:n], self._imu_pending[n:]
+            self.dead_reckoning.update(upto, enc)
+            self.estimator.update(upto, enc)
         return self.estimator.pose
 
     # ------------------------------------------------------------------ visual odometry
@@ -150,7 +159,7 @@ class Onboard:
         ok = res.status == "ok"
         slip = 1.0 - float(res.motion_rover[0, 3]) / commanded if ok and abs(commanded) > 1e-3 else math.nan
         if ok:
-            est.apply_vo_correction(res.motion_rover)
+            est.apply_vo_correction(res.motion_rover, update_attitude=self.vo_update == "full_pose")
         else:
             est.mark_vo_frame()
         self._last_frame_distance_m = est.distance_m

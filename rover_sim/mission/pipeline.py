@@ -78,6 +78,7 @@ class Mission:
                 stereo=make_stereo(nav.stereo),
                 planner_factory=lambda: make_planner(nav.planner),
                 shape=rover_shape() if nav.vo.shadow_mask else None,
+                vo_update=nav.vo.update,
             )
         except BaseException:  # a plugin that does not load, or Ctrl-C: release the renderer's GL context
             self.world.close()

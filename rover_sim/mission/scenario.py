@@ -132,11 +132,16 @@ class VoSpec(_Spec):
     params: VoParams = Field(default_factory=VoParams)
     shadow_mask: bool = Field(True, description="Bar features in and near the rover's predicted shadow (issue #17).")
     seek_texture: bool = Field(True, description="Repoint the mast at texture when the planned view is poor.")
+    update: Literal["position", "full_pose"] = Field(
+        "position", description="What an accepted VO step corrects: 'position' (MER: the IMU keeps attitude) or "
+        "'full_pose' (attitude too)."
+    )
 
     @model_validator(mode="before")
     @classmethod
     def _flat(cls, data: Any) -> Any:
-        return _split_params(data, ("enabled", "impl", "sanity", "shadow_mask", "seek_texture"), "enabled")
+        own = ("enabled", "impl", "sanity", "shadow_mask", "seek_texture", "update")
+        return _split_params(data, own, "enabled")
 
 
 class StereoSpec(_Spec):

@@ -15,13 +15,14 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from rover_sim.mission.odometry_spec import OdometryErrorSpec
 from rover_sim.render.imaging import ImagingSpec
 
 Profile = Literal["flight", "ideal"]
 DEFAULT_PROFILE: Profile = "ideal"
 
 #: sub-table name -> model class (with ``profile_defaults(profile) -> dict``); filled as error families land
-SUBTABLES: dict[str, type[BaseModel]] = {"imaging": ImagingSpec}
+SUBTABLES: dict[str, type[BaseModel]] = {"imaging": ImagingSpec, "odometry": OdometryErrorSpec}
 
 
 class SensorsSpec(BaseModel):
@@ -31,6 +32,7 @@ class SensorsSpec(BaseModel):
 
     profile: Profile = Field(DEFAULT_PROFILE, description="'flight' (errors as flown) or 'ideal' (none).")
     imaging: ImagingSpec = Field(default_factory=ImagingSpec)
+    odometry: OdometryErrorSpec = Field(default_factory=OdometryErrorSpec)
 
     @model_validator(mode="before")
     @classmethod

@@ -17,13 +17,14 @@ from types import MappingProxyType
 import numpy as np
 
 from nav.camera import StereoRig
+from nav.geometry import R_to_quat_wxyz
 from nav.trajectory import Pose
 from rover_sim.mission.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
 from rover_sim.mission.observation import Observation, StereoImages
 from rover_sim.mission.scenario import Scenario
 from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoFrame, StereoRenderer, terrain_texture
 from rover_sim.sim.physics import RoverSim
-from rover_sim.sim.sensors import SensorSuite
+from rover_sim.sim.sensors import OdometryErrors, SensorSuite
 from rover_sim.sim.world import Sun
 from terrains import Terrain, synthesize
 
@@ -35,6 +36,16 @@ SETTLE_S = 1.0  # the rover settles on the terrain before the run starts
 def texture_px_per_m(terrain: Terrain, wanted_px_per_m: float) -> float:
     side = 2.0 * max(terrain.half_x_m, terrain.half_y_m)
     return float(min(wanted_px_per_m, MAX_TEXTURE_SIDE_PX / side))
+
+
+def with_heading_error(pose: Pose, heading_error_rad: float) -> Pose:
+    """``pose`` turned by ``heading_error_rad`` about the site vertical (a sun-finding heading error); the
+    position, roll and pitch relative to the vertical are kept. Zero: ``pose`` itself."""
+    if heading_error_rad == 0.0:
+        return pose
+    c, s = math.cos(heading_error_rad), math.sin(heading_error_rad)
+    Rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return Pose(pose.t_s, pose.position_xyz_m, R_to_quat_wxyz(Rz @ pose.R_world_rover))
 
 
 class World:
@@ -63,7 +74,12 @@ class World:
         self.mast_pan_deg, self.mast_elevation_deg = 0.0, 0.0
         self.point_mast(scenario.nav.mast_pan_deg, scenario.nav.mast_tilt_deg)
         self.sim.step_for(SETTLE_S)
-        self.sensors = SensorSuite(self.sim, seed=scenario.seed)  # samples the IMU inside the physics loop
+        # [sensors.odometry]: this run's draw of the odometry and attitude errors (none in the ideal profile)
+        odo = scenario.sensors.odometry
+        self.odometry_errors = OdometryErrors.draw(scenario.seed, **odo.drawn_sizes())
+        if odo.sinkage_rolling_radius and hasattr(self.sim.law, "sinkage_rolling_radius"):  # the Bekker law
+            self.sim.law.sinkage_rolling_radius = True
+        self.sensors = SensorSuite(self.sim, seed=scenario.seed, errors=self.odometry_errors)  # IMU in the loop
         noise = ImageNoise(seed=scenario.seed) if scenario.nav.image_noise else None
         self.renderer = StereoRenderer(
             self.sim,
@@ -82,7 +98,9 @@ class World:
         self.sun_direction_world = Sun(sun_az_deg, sun_el_deg).direction()
         self._clock_sim_s = self.sim.time_s
         # the operator-given start of the drive (previous localisation and sun finding), fixed once settled
-        self.operator_start_pose = Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz())
+        self.operator_start_pose = with_heading_error(
+            Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz()), self.odometry_errors.heading_error_rad
+        )
 
     # ------------------------------------------------------------------ commands to the hardware
     def point_mast(self, pan_deg: float, elevation_deg: float) -> None:

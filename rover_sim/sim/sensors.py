@@ -20,6 +20,15 @@ Encoder model: MER drive motors carry shaft encoders behind a gear train of abou
 resolved to 10^4-10^5 counts per turn; we quantise to ``2**14`` counts per wheel revolution (0.38 mrad, 48 um of
 rolling at r = 0.125 m) by truncation as an incremental counter does, and the absolute steering sensors to
 ``2**12`` counts per turn (0.088 deg) by rounding. Both resolutions are assumptions, not flight numbers.
+
+Odometry and attitude errors (``[sensors.odometry]``, :mod:`rover_sim.mission.odometry_spec` for the sizes and
+sources): :class:`OdometryErrors` draws them once per run from the scenario seed (its own random stream, so the
+IMU noise is the same draw with or without them). They are applied where they arise: the IMU measures through
+its misaligned, mis-scaled axes (``M = diag(1 + s) R_mis^T``, before bias and noise), the wheel encoders see the
+rotation a wheel of the *true* effective radius needed for the rolling the physics did (``angle / (1 + e)``: the
+onboard odometry, which keeps the nominal radius, is off by the radius error ``e``), and the steering sensors
+read the true angle minus a zero offset. The start-heading error is applied by the world to the operator-given
+start pose. All zero (the ideal profile): nothing is drawn or applied.
 """
 
 from __future__ import annotations
@@ -30,6 +39,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.signal import lfilter
+from scipy.spatial.transform import Rotation
 
 from nav.types import EncoderSample, ImuSample
 
@@ -39,6 +49,46 @@ if TYPE_CHECKING:
 G0_M_S2 = 9.80665  # standard (Earth) gravity: the g of "micro-g" in accelerometer datasheets
 DEG = math.pi / 180.0
 TIME_TOL_S = 1e-9  # slack when comparing a sample's due time with the simulation clock
+
+
+@dataclass(frozen=True)
+class OdometryErrors:
+    """One run's draw of the odometry and attitude errors (see the module docstring); :meth:`none` is ideal."""
+
+    wheel_angle_scale: np.ndarray | None = None  # (6,) WHEELS order: 1 / (1 + radius error)
+    steer_offset_rad: np.ndarray | None = None  # (4,) STEERED order: sensor reading = true - offset
+    gyro_matrix: np.ndarray | None = None  # (3, 3): measured = M @ true (misalignment and scale factor)
+    accel_matrix: np.ndarray | None = None  # (3, 3)
+    heading_error_rad: float = 0.0  # added to the operator-given start heading
+
+    @classmethod
+    def none(cls) -> OdometryErrors:
+        return cls()
+
+    @classmethod
+    def draw(
+        cls,
+        seed: int,
+        wheel_radius_error_pct: float = 0.0,
+        steer_offset_deg: float = 0.0,
+        imu_misalignment_mrad: float = 0.0,
+        gyro_scale_factor_ppm: float = 0.0,
+        accel_scale_factor_ppm: float = 0.0,
+        heading_error_deg: float = 0.0,
+    ) -> OdometryErrors:
+        """Seeded 1-sigma Gaussian draws of each term; a zero size draws nothing and leaves the term off."""
+        rng = np.random.default_rng([seed, 0x0D0])  # own stream: the IMU noise draw is unchanged
+        scale = steer = gyro = accel = None
+        if wheel_radius_error_pct > 0:
+            scale = 1.0 / (1.0 + rng.normal(0.0, wheel_radius_error_pct / 100.0, 6))
+        if steer_offset_deg > 0:
+            steer = rng.normal(0.0, math.radians(steer_offset_deg), 4)
+        if imu_misalignment_mrad > 0 or gyro_scale_factor_ppm > 0 or accel_scale_factor_ppm > 0:
+            R_mis = Rotation.from_rotvec(rng.normal(0.0, imu_misalignment_mrad * 1e-3, 3)).as_matrix()
+            gyro = np.diag(1.0 + rng.normal(0.0, gyro_scale_factor_ppm * 1e-6, 3)) @ R_mis.T
+            accel = np.diag(1.0 + rng.normal(0.0, accel_scale_factor_ppm * 1e-6, 3)) @ R_mis.T
+        heading = math.radians(rng.normal(0.0, heading_error_deg)) if heading_error_deg > 0 else 0.0
+        return cls(scale, steer, gyro, accel, heading)
 
 
 @dataclass(frozen=True)
@@ -72,8 +122,11 @@ class ImuParams:
 class ImuModel:
     """Adds LN-200-class errors to true body rates and specific forces; stateful (the gyro bias wanders)."""
 
-    def __init__(self, params: ImuParams | None = None, seed: int = 0) -> None:
+    def __init__(
+        self, params: ImuParams | None = None, seed: int = 0, errors: OdometryErrors | None = None
+    ) -> None:
         self.params = params or ImuParams()
+        self.errors = errors or OdometryErrors.none()
         self._rng = np.random.default_rng(seed)
         p = self.params
         self.gyro_bias_rad_s = self._rng.normal(0.0, p.gyro_bias_rad_s, 3)  # stationary start
@@ -88,6 +141,10 @@ class ImuModel:
         gyro_true = np.atleast_2d(np.asarray(gyro_true_rad_s, dtype=float))
         accel_true = np.atleast_2d(np.asarray(accel_true_m_s2, dtype=float))
         n = len(gyro_true)
+        if self.errors.gyro_matrix is not None:  # the IMU senses along its own (misaligned, mis-scaled) axes
+            gyro_true = gyro_true @ self.errors.gyro_matrix.T
+        if self.errors.accel_matrix is not None:
+            accel_true = accel_true @ self.errors.accel_matrix.T
         phi = math.exp(-dt_s / p.gyro_bias_corr_time_s)
         drive = rng.standard_normal((n, 3)) * (p.gyro_bias_rad_s * math.sqrt(1.0 - phi * phi))
         bias, _ = lfilter([1.0], [1.0, -phi], drive, axis=0, zi=(phi * self.gyro_bias_rad_s)[None, :])
@@ -127,11 +184,16 @@ class EncoderParams:
 class EncoderModel:
     """Quantised wheel (cumulative, truncated to whole counts) and steering (rounded) angles."""
 
-    def __init__(self, params: EncoderParams | None = None) -> None:
+    def __init__(self, params: EncoderParams | None = None, errors: OdometryErrors | None = None) -> None:
         self.params = params or EncoderParams()
+        self.errors = errors or OdometryErrors.none()
 
     def measure(self, t_s: float, wheel_angle_rad: np.ndarray, steer_angle_rad: np.ndarray) -> EncoderSample:
-        p = self.params
+        p, e = self.params, self.errors
+        if e.wheel_angle_scale is not None:  # the effective radius differs from the nominal one
+            wheel_angle_rad = np.asarray(wheel_angle_rad, dtype=float) * e.wheel_angle_scale
+        if e.steer_offset_rad is not None:  # the steering sensor's zero is off
+            steer_angle_rad = np.asarray(steer_angle_rad, dtype=float) - e.steer_offset_rad
         wheel = np.floor(np.asarray(wheel_angle_rad, dtype=float) / p.wheel_quantum_rad) * p.wheel_quantum_rad
         steer = np.rint(np.asarray(steer_angle_rad, dtype=float) / p.steer_quantum_rad) * p.steer_quantum_rad
         return EncoderSample(t_s=t_s, wheel_angle_rad=wheel, steer_angle_rad=steer)
@@ -155,10 +217,12 @@ class SensorSuite:
         imu: ImuParams | None = None,
         encoders: EncoderParams | None = None,
         attach: bool = True,
+        errors: OdometryErrors | None = None,
     ) -> None:
         self.sim = sim
-        self.imu = ImuModel(imu, seed)
-        self.encoders = EncoderModel(encoders)
+        self.errors = errors or OdometryErrors.none()
+        self.imu = ImuModel(imu, seed, self.errors)
+        self.encoders = EncoderModel(encoders, self.errors)
         self.steps_per_imu_sample = max(1, int(round(1.0 / (self.imu.params.rate_hz * sim.timestep_s))))
         self._imu: list[ImuSample] = []
         self._enc: list[EncoderSample] = []

@@ -139,6 +139,10 @@ class WheelSoilLaw:
         mass_share_kg: float = 29.0,
     ) -> None:
         self.radius_m = radius_m
+        # rolling radius r - z (issue #16): a sunk wheel advances (r - z) per radian, not r, so the wheel odometry
+        # (nominal r) over-counts by z / r (about 5 % in the sim's sand). Off by default (today's law, on which the
+        # slip anchors were calibrated); [sensors.odometry] sinkage_rolling_radius = true turns it on.
+        self.sinkage_rolling_radius = False
         self.mass_share_kg = mass_share_kg  # vehicle mass per wheel, for the bristle damping
         self.width_m = width_m
         self.n_wheels = n_wheels
@@ -231,12 +235,12 @@ class WheelSoilLaw:
             vx_w, vy_w, vz_w = inputs[k], inputs[k + 1], inputs[k + 2]
             v_x = vx_w * lx + vy_w * ly + vz_w * lz
             v_y = vx_w * tx + vy_w * ty + vz_w * tz
-            v_rim = inputs[13 * nw + w] * r
             sink_coef, expo, tan_phi, cb, K, ss, tread, n, rc_coef = self._consts[material[w]]
             # steps 1-3: sinkage (slip-sinkage from the slip the soil has mobilised, j/L: the state's steady state
             # is j = i L, a physically lagged, noise-free slip), patch length, shear strength
             i_mob = min(max(self._jx[w] / self._patch[w], 0.0), 1.0)
             z = (sink_coef * W) ** expo * (1.0 + ss * i_mob)
+            v_rim = inputs[13 * nw + w] * (r - min(z, 0.5 * r) if self.sinkage_rolling_radius else r)
             L = r * acos(max(1.0 - z / r, -1.0)) + tread
             self._patch[w] = L
             f_max = cb * L + W * tan_phi

@@ -140,9 +140,16 @@ def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsy
     plugin = "examples.opencv_vo:OpenCvStereoVO"
     results = bench_vo(str(out), out_root=tmp_path, plugins=[plugin], cases=[case], case_scenarios=scenarios)
     table = capsys.readouterr().out
-    assert f"| MER VO (builtin) | {case} |" in table and f"| {plugin} | {case} |" in table
+    assert f"| MER VO (builtin) | flight | position | {case} |" in table
+    assert f"| {plugin} | flight | position | {case} |" in table
+    assert f"| MER VO (builtin) | ideal | position | {case} |" in table
+    assert f"| MER VO (builtin), full-pose update | flight | full_pose | {case} |" in table
     saved = json.loads(out.read_text())
-    assert set(saved["plugins"][plugin][case]) == set(saved[case])
+    assert set(saved["plugins"][plugin][case]) == set(saved[case]) == set(saved["ideal"][case])
+    assert saved[case]["profile"] == "flight" and saved["ideal"][case]["profile"] == "ideal"
+    assert saved["full_pose"][case]["vo_update"] == "full_pose"
+    assert set(saved[case]["kitti_segment_error_pct"]) == {"vo", "dead_reckoning"}
+    assert saved[case]["rms_position_error_m"]["vo"] < saved[case]["rms_position_error_m"]["dead_reckoning"]
     mer, ours = results[case], results["plugins"][plugin][case]
     assert mer["passed"] and mer["vo_convergence_pct"] == 100.0
     # the example VO really ran in the loop (its steps were judged), and did better than dead reckoning

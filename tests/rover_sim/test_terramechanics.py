@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rover_sim.bench.slip import measure_slip, parked_drift_m, slope_terrain
-from rover_sim.sim.terramechanics import BEDROCK, SAND, WheelSoilLaw, pack_inputs
+from rover_sim.sim.terramechanics import BEDROCK, MATERIALS, SAND, WheelSoilLaw, pack_inputs
 
 W_N = 108.0  # one sixth of MER's weight on Mars
 DT = 0.005
@@ -113,3 +113,19 @@ def test_same_seed_same_terrain_bytes_and_same_slip():
 def test_bedrock_params_are_stiffer_than_sand():
     assert BEDROCK.shear_modulus_m < SAND.shear_modulus_m
     assert BEDROCK.friction_angle_deg > SAND.friction_angle_deg
+
+
+def test_sinkage_rolling_radius_turns_nominal_rolling_into_braking_in_sand_only():
+    """[sensors.odometry] sinkage_rolling_radius: a wheel sunk z rolls on r - z, so a hub moving at r omega (no
+    slip by the nominal radius) outruns its rolling speed omega (r - z): the soil brakes it and the slip ratio
+    it reports is negative, about -z / (r - z). On bedrock (sinkage below 0.5 mm) it is a few tenths of a %."""
+    nominal, sunk = _one_wheel(), _one_wheel()
+    sunk.sinkage_rolling_radius = True
+    assert _steady_traction(sunk, 0.0) < _steady_traction(nominal, 0.0)
+    z = sunk.state.sinkage_m[0]
+    assert 0.0 < z < 0.1 * sunk.radius_m
+    assert sunk.state.slip[0] == pytest.approx(-z / (sunk.radius_m - z), rel=0.05)
+    rock, sunk_on_rock = MATERIALS.index(BEDROCK), _one_wheel()
+    sunk_on_rock.sinkage_rolling_radius = True
+    _steady_traction(sunk_on_rock, 0.0, material=rock)
+    assert sunk_on_rock.state.sinkage_m[0] < 5e-4 and abs(sunk_on_rock.state.slip[0]) < 5e-3

@@ -72,7 +72,7 @@ def test_failure_limit_halts_the_drive(tmp_path):
 @pytest.mark.parametrize("stub", ["nothing", "echo"])
 def test_stub_vo_fails_bench_vo(stubs, stub, tmp_path):
     """A do-nothing VO fails the shadow case (convergence); the echo fails where the wheels slip (msstb)."""
-    results = bench_vo(None, out_root=tmp_path, plugins=[stubs[stub]], cases=["shadow", "msstb"])
+    results = bench_vo(None, out_root=tmp_path, plugins=[stubs[stub]], cases=["shadow", "msstb"], quick=True)
     per = results["plugins"][stubs[stub]]
     assert not all(r["passed"] for r in per.values()), per
     assert not all_passed(results)
