@@ -23,6 +23,7 @@ from terrains.recipe import (
     SlopeSpec,
     TerrainRecipe,
 )
+from terrains.rock_shapes import IRREGULAR_FORMS, IrregularRock, rock_class
 from terrains.synth import synthesize
 from terrains.terrain import Material, Rock, Terrain
 
@@ -30,6 +31,9 @@ __all__ = [
     "CraterSpec",
     "Disc",
     "ExplicitRockSpec",
+    "IRREGULAR_FORMS",
+    "IrregularRock",
+    "rock_class",
     "InvalidRockError",
     "InvalidTerrainError",
     "Material",

@@ -180,13 +180,18 @@ def bench_rocks_cmd(
     json: JsonOpt = None,
     seed: Annotated[int | None, typer.Option(help="Replace the scenario seed (another rock field).")] = None,
     junit: JunitOpt = None,
+    irregular_fraction: Annotated[
+        float | None,
+        typer.Option("--irregular-fraction", min=0.0, max=1.0, help="Fraction of irregular rocks (0..1)."),
+    ] = None,
 ) -> None:
-    """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO."""
+    """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
+    figures by rock class (analytic / irregular) with --irregular-fraction."""
     with guarded():
         from rover_sim.bench.junit_cases import rocks_cases
         from rover_sim.bench.rocks import bench_rocks
 
-        result = bench_rocks(str(json) if json else None, seed=seed)
+        result = bench_rocks(str(json) if json else None, seed=seed, irregular_fraction=irregular_fraction)
     finish(junit, "bench rocks", rocks_cases(result))
 
 
