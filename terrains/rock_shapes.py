@@ -181,10 +181,3 @@ def make_irregular(rocks: list[Rock], fraction: float, forms: tuple[str, ...], r
         )
     return out
 
-
-def rock_from_dict(fields: dict) -> Rock:
-    """A rock saved by :meth:`terrains.Terrain.save` (irregular rocks carry ``form_seed``)."""
-    if "form_seed" in fields:
-        return IrregularRock(**fields)
-    return Rock(**fields)
-

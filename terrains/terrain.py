@@ -478,16 +478,22 @@ class Terrain:
                 f"{FILE_FORMAT!r} version {FILE_VERSION} (re-synthesise the terrain from its recipe and seed)"
             )
         recipe = None if meta["recipe"] is None else TerrainRecipe.model_validate(meta["recipe"])
-        from terrains.rock_shapes import rock_from_dict  # (it builds on Rock)
-
         return cls(
             heights_m=heights,
             cell_size_m=meta["cell_size_m"],
             materials=materials,
-            rocks=[rock_from_dict(r) for r in meta["rocks"]],
+            rocks=[_rock_from_fields(r, path) for r in meta["rocks"]],
             seed=meta["seed"],
             recipe=recipe,
         )
+
+
+def _rock_from_fields(fields: dict, path: object) -> Rock:
+    """A saved rock: a :class:`Rock` or the subclass whose fields it has (e.g. terrains.rock_shapes.IrregularRock)."""
+    for kind in (Rock, *Rock.__subclasses__()):
+        if set(fields) == {f.name for f in dataclasses.fields(kind)}:
+            return kind(**fields)
+    raise TerrainFileError(f"{path}: rock fields {sorted(fields)} match no rock kind; re-synthesise the terrain")
 
 
 def _candidate_pairs(table: _RockTable, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
