@@ -55,10 +55,12 @@ def pairs_for_profile(profile: str, resolution_px: int, seeds=(0, 1, 2)) -> list
     if profile == "flight":
         # seam: the flight profile renders raw (distorted) images and rectifies them onboard (issue #16 item 1)
         raise ConfigError(
-            "bench stereo --profile flight: raw->rectified pairs need the lens models and onboard rectification, "
-            "which this build does not have; use --profile ideal"
+            "bench stereo",
+            "--profile",
+            "flight: raw->rectified pairs need the lens models and onboard rectification, which this build does not "
+            "have; use --profile ideal",
         )
-    raise ConfigError(f"bench stereo --profile {profile!r}: use one of {', '.join(PROFILES)}")
+    raise ConfigError("bench stereo", "--profile", f"{profile!r}: use one of {', '.join(PROFILES)}")
 
 
 def simulated_pairs(
