@@ -34,9 +34,14 @@ RESOLUTIONS_PX = (256, 1024)
 PROFILES = ("ideal", "flight")
 
 
+def params_for(resolution_px: int) -> StereoParams:
+    """The 256 px parameters (32 disparities) scaled to ``resolution_px`` (:meth:`StereoParams.for_resolution`)."""
+    return StereoParams(num_disparities=NUM_DISPARITIES).for_resolution(resolution_px)
+
+
 def num_disparities(resolution_px: int) -> int:
     """The same range in metres at every resolution: 32 at 256 px, 128 at 1024 px (a multiple of 16)."""
-    return max(16, int(round(NUM_DISPARITIES * resolution_px / 256 / 16)) * 16)
+    return params_for(resolution_px).num_disparities
 
 
 @dataclass(frozen=True)
@@ -117,8 +122,8 @@ def _time_pair_ms(fns: tuple, repeats: int) -> list[float]:
 
 
 def _rows(pairs: list[SimPair], resolution_px: int, repeats: int) -> list[dict]:
-    n_disp = num_disparities(resolution_px)
-    params = StereoParams(num_disparities=n_disp)
+    params = params_for(resolution_px)
+    n_disp = params.num_disparities
     rows = []
     for p in pairs:
         ours = compute_disparity(p.left, p.right, params)

@@ -156,9 +156,12 @@ def test_bench_stereo_pairs_come_from_the_sensor_profile() -> None:
 @pytest.mark.render
 def test_rendered_1024_pair_matches_its_depth() -> None:
     """Full-resolution (1024^2) hazcam pair: dense and within 1 px of the rendered depth's disparity."""
-    from rover_sim.bench.stereo import num_disparities
+    from rover_sim.bench.stereo import params_for
 
     (pair,) = simulated_pairs(seeds=(3,), materials=("sand",), resolution_px=1024)
-    d = compute_disparity(pair.left, pair.right, StereoParams(num_disparities=num_disparities(1024)))
-    density, bad1 = score(d, pair.gt_disparity_px)
-    assert density >= 0.6 and bad1 <= 0.02, (density, bad1)
+    params = params_for(1024)
+    assert params == StereoParams(num_disparities=128, bandpass_sigma_fine_px=1.2, bandpass_sigma_coarse_px=5.0)
+    density, bad1 = score(compute_disparity(pair.left, pair.right, params), pair.gt_disparity_px)
+    bm_density, bm_bad1 = score(stereobm_baseline(pair.left, pair.right, 128, 9), pair.gt_disparity_px)
+    assert density >= 0.75 and bad1 <= 0.015, (density, bad1)
+    assert bad1 < bm_bad1, (bad1, bm_bad1)
