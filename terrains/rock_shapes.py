@@ -180,4 +180,3 @@ def make_irregular(rocks: list[Rock], fraction: float, forms: tuple[str, ...], r
             )
         )
     return out
-

@@ -36,8 +36,6 @@ from pathlib import Path
 import numpy as np
 
 from nav.rocks import ROCK_SHAPES
-from rover_sim.mission.survey import associate, rocks_in_true_frame
-from terrains import Terrain, rock_class
 from rover_sim.mission import acceptance
 from rover_sim.mission.scenario import load_scenario
 from rover_sim.mission.survey import (
@@ -46,10 +44,13 @@ from rover_sim.mission.survey import (
     RockSiteSurvey,
     SurveyConfig,
     adjust_chain,
+    associate,
     evaluate_chain,
     evaluate_extraction,
     evaluate_match,
+    rocks_in_true_frame,
 )
+from terrains import Terrain, rock_class
 
 SCENARIO = "rock_localization"
 MAX_MATCH_SEPARATION_M = 26.0
@@ -175,8 +176,9 @@ def _by_class(sites: list, terrain: Terrain, max_range_m: float = 30.0, min_heig
     truth = terrain.rocks
     classes = np.array([rock_class(r) for r in truth])
     txy = np.array([[r.x_m, r.y_m] for r in truth]).reshape(-1, 2)
-    counts = {c: {"n_true": 0, "n_found": 0, "n_extracted": 0, "n_correct": 0, "rms_m": []} for c in ("analytic",
-                                                                                                     "irregular")}
+    counts = {
+        c: {"n_true": 0, "n_found": 0, "n_extracted": 0, "n_correct": 0, "rms_m": []} for c in ("analytic", "irregular")
+    }
     for site in sites:
         idx = associate(site, truth)
         cam = site.T_world_rover_true[:2, 3]
