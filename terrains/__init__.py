@@ -24,6 +24,7 @@ from terrains.recipe import (
     TerrainRecipe,
 )
 from terrains.regolith import albedo_tile
+from terrains.rock_shapes import IRREGULAR_FORMS, IrregularRock, rock_class
 from terrains.synth import synthesize
 from terrains.terrain import Material, Rock, Terrain
 
@@ -31,6 +32,9 @@ __all__ = [
     "CraterSpec",
     "Disc",
     "ExplicitRockSpec",
+    "IRREGULAR_FORMS",
+    "IrregularRock",
+    "rock_class",
     "InvalidRockError",
     "InvalidTerrainError",
     "Material",

@@ -186,6 +186,17 @@ class RockSpec(_Spec):
     buried_fraction: tuple[float, float] = Field(
         (0.1, 0.3), description="Range of buried depth over total (buried + visible) rock height."
     )
+    irregular_fraction: float = Field(
+        0.0,
+        ge=0.0,
+        le=1.0,
+        description="Fraction of random rocks drawn as irregular (terrains/rock_shapes.py) instead of analytic.",
+    )
+    irregular_forms: list[Literal["irregular_hull", "angular_block", "slab"]] = Field(
+        default_factory=lambda: ["irregular_hull", "angular_block", "slab"],
+        min_length=1,
+        description="Irregular forms drawn uniformly (noise-displaced hull, angular block, flat slab).",
+    )
     exclusion_zones: list[Disc] = Field(
         default_factory=lambda: [Disc(0.0, 0.0, 1.5)],
         description="Discs (x_m, y_m, radius_m) free of random rocks; the default clears the rover start.",

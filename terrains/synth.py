@@ -26,6 +26,7 @@ from terrains.recipe import (
     RockSpec,
     TerrainRecipe,
 )
+from terrains.rock_shapes import make_irregular
 from terrains.terrain import Material, Rock, Terrain, bilinear_sample
 
 #: Extra skirt depth below the lowest ground point under a rock's footprint, so no gap shows on slopes.
@@ -45,6 +46,7 @@ class Layer(IntEnum):
     RIPPLES = 2
     MATERIAL = 3
     ROCKS = 4
+    IRREGULAR_ROCKS = 8  # which rocks are irregular, their forms and vertices (terrains/rock_shapes.py)
 
 
 def synthesize(recipe: TerrainRecipe, seed: int) -> Terrain:
@@ -101,6 +103,12 @@ def synthesize(recipe: TerrainRecipe, seed: int) -> Terrain:
     keep_clear = [Disc(r.x_m, r.y_m, r.footprint_radius_m) for r in explicit]
     half_x, half_y = float(xs_m[-1]), float(ys_m[-1])
     random_rocks = rocks_golombek(half_x, half_y, recipe.rocks, keep_clear, layer_rng(seed, Layer.ROCKS))
+    random_rocks = make_irregular(
+        random_rocks,
+        recipe.rocks.irregular_fraction,
+        tuple(recipe.rocks.irregular_forms),
+        layer_rng(seed, Layer.IRREGULAR_ROCKS),
+    )
     explicit = [
         seat_rock(rock, heights, cell, buried_m=spec.buried_m)
         for rock, spec in zip(explicit, recipe.explicit_rocks, strict=True)

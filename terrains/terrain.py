@@ -403,14 +403,22 @@ class Terrain:
         """
         x, y = _as_xy(x_m, y_m)
         out = bilinear_sample(self.heights_m, self.cell_size_m, x, y).ravel()
-        if self.rocks and x.size:
-            table = _RockTable.of(self.rocks)
+        analytic = [r for r in self.rocks if r.shape in _SHAPE_CODES]
+        if analytic and x.size:
+            table = _RockTable.of(analytic)
             px, py = x.ravel(), y.ravel()
             rock_idx, pt_idx = _candidate_pairs(table, px, py)
             if rock_idx.size:
                 z = table.top_z(rock_idx, px[pt_idx], py[pt_idx])
                 inside = ~np.isnan(z)
                 np.maximum.at(out, pt_idx[inside], z[inside])
+        for rock in (r for r in self.rocks if r.shape not in _SHAPE_CODES):  # irregular rocks (rock_shapes.py)
+            px, py = x.ravel(), y.ravel()
+            near = np.flatnonzero(np.hypot(px - rock.x_m, py - rock.y_m) <= rock.footprint_radius_m)
+            if near.size:
+                z = np.atleast_1d(rock.top_z_at(px[near], py[near]))
+                inside = ~np.isnan(z)
+                np.maximum.at(out, near[inside], z[inside])
         return _scalar_or_array(out.reshape(x.shape))
 
     # -- output ----------------------------------------------------------------------------------------------
@@ -474,10 +482,18 @@ class Terrain:
             heights_m=heights,
             cell_size_m=meta["cell_size_m"],
             materials=materials,
-            rocks=[Rock(**r) for r in meta["rocks"]],
+            rocks=[_rock_from_fields(r, path) for r in meta["rocks"]],
             seed=meta["seed"],
             recipe=recipe,
         )
+
+
+def _rock_from_fields(fields: dict, path: object) -> Rock:
+    """A saved rock: a :class:`Rock` or the subclass whose fields it has (e.g. terrains.rock_shapes.IrregularRock)."""
+    for kind in (Rock, *Rock.__subclasses__()):
+        if set(fields) == {f.name for f in dataclasses.fields(kind)}:
+            return kind(**fields)
+    raise TerrainFileError(f"{path}: rock fields {sorted(fields)} match no rock kind; re-synthesise the terrain")
 
 
 def _candidate_pairs(table: _RockTable, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ import numpy as np
 from nav.camera import StereoRig
 from nav.stereo import StereoParams, compute_disparity, disparity_to_xyz_cam, xyz_cam_to_rover
 
-_SAD_LIMIT = 2**24  # compute_disparity sums SAD in float32: strip rows * width * 2 * quantise_cap must stay below
+_SAD_LIMIT = 2**24  # strip rows * width * 2 * quantise_cap stay below this (the former float32 limit)
 _MAX_STACKED_ROWS = 32766  # ... and its per-disparity cost planes, stacked, stay below OpenCV's 32767 rows
 
 
@@ -25,9 +25,10 @@ _MAX_STACKED_ROWS = 32766  # ... and its per-disparity cost planes, stacked, sta
 def disparity_tiled(left_u8: np.ndarray, right_u8: np.ndarray, params: StereoParams, margin_px: int = 16) -> np.ndarray:
     """Disparity (px, NaN where invalid) of a rectified pair of any size, matched in horizontal strips.
 
-    :func:`nav.stereo.compute_disparity` is limited to about 512 x 512 pixels (exact float32 SAD sums); rows are
-    epipolar lines, so a large image is matched as strips of rows, each padded by ``margin_px`` rows (at least the
-    SAD half window plus the band-pass kernel) that are discarded. Strip statistics (band-pass scaling) are local.
+    Rows are epipolar lines, so a large image is matched as strips of rows, each padded by ``margin_px`` rows (at
+    least the SAD half window plus the band-pass kernel) that are discarded. Strip statistics (band-pass scaling)
+    are local. (:func:`nav.stereo.compute_disparity` now takes any size in one call; the strips, sized as when it
+    was limited to float32-exact sums, are kept so the survey's results stay as they were.)
     """
     h_px, w_px = left_u8.shape
     max_rows = min((_SAD_LIMIT - 1) // (w_px * 2 * params.quantise_cap), _MAX_STACKED_ROWS // params.num_disparities)

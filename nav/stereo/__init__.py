@@ -41,8 +41,9 @@ OpenCV calls on the searched rows, written into buffers kept between calls (:cla
 array costs page faults that take longer than the call filling it). On the 256x256 hazcam pairs of
 ``rover-sim bench stereo`` (32 disparities) a call takes about 2.3 ms, 1.2-1.4 times OpenCV's StereoBM on the same
 machine: the coarse search and row windows about 0.45 ms, the full-resolution search 0.65 ms, the rest post-processing
-(the blob filter alone 0.15-0.25 ms). Images are limited to ``H * W * 2 * cap < 2^24`` (MER binned to 256x256 for the
-same reason of cost).
+(the blob filter alone 0.15-0.25 ms). Any size up to 4096 px a side is exact (window sums in int32 where float32
+would round; the SAD volume is replaced by the scores beside each running winner when it would exceed 64 MB), e.g.
+full-resolution 1024x1024 navcam pairs, 741x500 or 640x480 (Rocky 8) images.
 
 Modules, in the order of the steps: :mod:`nav.stereo.params` (parameters and result types),
 :mod:`nav.stereo.bandpass` (step 1, and the texture check), :mod:`nav.stereo.sad` (the SAD engine, step 3, and

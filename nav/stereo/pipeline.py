@@ -17,7 +17,7 @@ from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle, uni
 from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
 from nav.stereo.sad import Engine, subpixel
 
-_SIZE_LIMIT = 2**24  # H * W * 2 * quantise_cap must stay below (see compute_disparity)
+MAX_SIDE_PX = 4096  # images up to this side (larger ones: bin them; the SAD engine's buffers grow as H * W)
 # A parabola curvature (SAD units) this large means a neighbour's score was NO_MATCH (not searched).
 _CURVATURE_LIMIT = float(2**19)
 _COARSE_SCALE = 4  # row_search_window matches the images binned 4x4 (two pyrDown)
@@ -96,9 +96,10 @@ def compute_disparity(left_u8: np.ndarray, right_u8: np.ndarray, params: StereoP
 
 
 def _check_size(shape: tuple[int, int], params: StereoParams) -> None:
-    if shape[0] * shape[1] * 2 * params.quantise_cap >= _SIZE_LIMIT:
+    """Any size up to ``MAX_SIDE_PX`` on a side: the SAD sums are exact at every size (see :class:`Engine`)."""
+    if max(shape) > MAX_SIDE_PX:
         raise ValueError(
-            f"image {shape} too large for exact float32 SAD sums: bin it to 512x512 or less (MER used 256x256)"
+            f"image {shape[1]}x{shape[0]} px: sides up to {MAX_SIDE_PX} px are supported; bin it (MER used 256x256)"
         )
 
 
@@ -256,8 +257,8 @@ _THREAD = threading.local()
 
 
 def _pipeline(shape: tuple[int, int], params: StereoParams) -> _Pipeline:
-    """The calling thread's pipeline for this shape and parameter set (two are kept: its SAD volume is
-    ``num_disparities * H * W * 4`` bytes)."""
+    """The calling thread's pipeline for this shape and parameter set (two are kept: its SAD volume is up to
+    ``VOLUME_BUDGET_BYTES``, its other buffers about 100 bytes per pixel)."""
     cache = getattr(_THREAD, "pipelines", None)
     if cache is None:
         cache = _THREAD.pipelines = {}

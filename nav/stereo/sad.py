@@ -13,6 +13,12 @@ import numpy as np
 
 from nav.stereo.params import NO_MATCH, TAG, RowWindow
 
+# Above this size the SAD volume (num_disparities * H * W float32) is not kept: the scores beside each pixel's running
+# winner are carried along instead (identical results; a 1024^2 search over 128 disparities would need 512 MB).
+VOLUME_BUDGET_BYTES = 64 * 2**20
+# Largest window-row sum (window rows x image columns x quantised values) kept exact when converted to float32.
+_EXACT_FLOAT32 = 2**24
+
 # ----------------------------------------------------------------------------------------------------------------
 # Step 3: SAD search
 # ----------------------------------------------------------------------------------------------------------------
@@ -21,9 +27,15 @@ from nav.stereo.params import NO_MATCH, TAG, RowWindow
 class Engine:
     """The SAD search over one image shape and disparity range, with its buffers (reused between calls).
 
-    ``costs[i, v, u]`` keeps every SAD key. A disparity is written only on the rows that search it, so other rows
-    may hold keys from an earlier call: they are read only for winners strictly inside their row's window. The
-    columns left of each disparity's first full window are never written and read ``NO_MATCH``.
+    Small searches keep every SAD key in ``costs[i, v, u]``. A disparity is written only on the rows that search it,
+    so other rows may hold keys from an earlier call: they are read only for winners strictly inside their row's
+    window. The columns left of each disparity's first full window are never written and read ``NO_MATCH``.
+    Searches whose volume exceeds ``VOLUME_BUDGET_BYTES`` keep two key planes instead and carry the keys at
+    ``winner - 1`` and ``winner + 1`` along with the running winner (``rolling``; same results where they count).
+
+    Exact at any size: window sums come from integral images, float32 where the whole image's sum stays below 2^24,
+    else int32 (exact to 2^31), and the window's row sums (below ``window_px * (W + hw) * max_value``, checked to be
+    < 2^24) are what is converted to float32.
     """
 
     def __init__(
@@ -42,7 +54,19 @@ class Engine:
             num_disparities,
             window_px,
         )
-        self.costs = np.full((num_disparities, h_px, w_px), NO_MATCH, np.float32)
+        if window_px * (w_px + hw + 1) * max_value >= _EXACT_FLOAT32:
+            raise ValueError(
+                f"image width {w_px} px too large for exact SAD sums with a {window_px} px window: "
+                f"use width < {_EXACT_FLOAT32 // (window_px * max_value) - hw - 1} px"
+            )
+        self.rolling = num_disparities * h_px * w_px * 4 > VOLUME_BUDGET_BYTES
+        n_planes = 2 if self.rolling else num_disparities  # rolling: the keys of the last two disparities
+        self.costs = np.full((n_planes, h_px, w_px), NO_MATCH, np.float32)
+        if self.rolling:  # running overall best, its neighbours' keys, and "best updated here" of the last two
+            self.best_run = np.empty(shape, np.float32)
+            self.minus_run = np.empty(shape, np.float32)
+            self.plus_run = np.empty(shape, np.float32)
+            self.updated = np.zeros((2, h_px, w_px), np.uint8)
         self.best = np.empty((3, h_px, w_px), np.float32)  # best key per disparity class (index mod 3)
         self.second = np.empty((3, h_px, w_px), np.float32)  # second-best key per class
         self.best_right = np.empty(shape, np.float32)  # best key per right pixel
@@ -77,6 +101,7 @@ class Engine:
             if n_cols <= 0:
                 break
             c = i % 3
+            plane = i % 2 if self.rolling else i
             integ = self.integral[:, : w_px + hw - s + 1]
             band = self.band[:, : w_px + hw - s + 1]
             views.append(
@@ -92,14 +117,32 @@ class Engine:
                     band,
                     band[:, win:],
                     band[:, :n_cols],
-                    self.costs[i, :, s + hw :],
+                    self.costs[plane, :, s + hw :],
                     self.best[c, :, s + hw :],
                     self.second[c, :, s + hw :],
                     self.tmp[:, :n_cols],
                     self.best_right[:, hw : w_px - s],
+                    self._rolling_views(i, s + hw) if self.rolling else None,
                 )
             )
         return views
+
+    def _rolling_views(self, i: int, u0: int) -> tuple:
+        """Columns ``u0:`` of: the previous disparity's keys (NO_MATCH before the first), the running best, the
+        keys beside it, "updated here" for this disparity and the previous one; and column ``u0 - 1``."""
+        prev = self.costs[(i - 1) % 2] if i > 0 else self.no_match
+        cols = slice(u0, None)
+        return (
+            prev[:, cols],
+            self.best_run[:, cols],
+            self.minus_run[:, cols],
+            self.plus_run[:, cols],
+            self.updated[i % 2, :, cols],
+            self.updated[(i - 1) % 2, :, cols],
+            u0 - 1 if i > 0 else -1,
+            self.updated[(i - 1) % 2],
+            self.plus_run,
+        )
 
     def search(self, window: RowWindow | None, rows: tuple[int, int] | None = None) -> None:
         """Search ``self.left_q`` against ``self.right_q`` (quantised images, written by the caller).
@@ -114,8 +157,13 @@ class Engine:
         self.best[:, v0:v1].fill(NO_MATCH)
         self.second[:, v0:v1].fill(NO_MATCH)
         self.best_right[v0:v1].fill(NO_MATCH)
+        if self.rolling:
+            for buf in (self.best_run, self.minus_run, self.plus_run):
+                buf[v0:v1].fill(NO_MATCH)
+            self.updated[:, v0:v1].fill(0)
         absdiff, integral, subtract, add_weighted = cv2.absdiff, cv2.integral, cv2.subtract, cv2.addWeighted
         vmin, vmax, f32, sdepth = cv2.min, cv2.max, cv2.CV_32F, self.sdepth
+        last = None
         # (views stop at the first disparity with no column left in the image)
         for view, runs in zip(self.views, _row_bands(window, self.num_disparities), strict=False):
             (
@@ -135,6 +183,7 @@ class Engine:
                 second,
                 tmp,
                 best_right,
+                rolling,
             ) = view
             for a, b in runs:
                 r0, r1, n = max(a - hw, 0), min(b + hw, h_px), b - a
@@ -148,6 +197,16 @@ class Engine:
                 vmin(best_c, key, dst=best_c)
                 right_c = best_right[a:b]
                 vmin(right_c, key, dst=right_c)
+                if rolling is not None:
+                    _carry_neighbours(key, rolling, a, b)
+            if rolling is not None and last is not None:  # the previous disparity's "updated" is consumed: clear it
+                for a, b in last[1]:
+                    rolling[7][a:b].fill(0)
+            last = (rolling, runs)
+        if last is not None and last[0] is not None:  # the last disparity's winners have no right neighbour
+            _, _, _, plus, updated, _, _, _, _ = last[0]
+            for a, b in last[1]:
+                cv2.copyTo(self.no_match[a:b, : plus.shape[1]], updated[a:b], plus[a:b])
 
     def winners(self, v0: int = 0, v1: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel (-1 if none),
@@ -184,7 +243,10 @@ class Engine:
         key_minus, key_plus, far_tmp, stack_row = self.key_minus[sl], self.key_plus[sl], self.far_tmp[sl], self.rows[sl]
         # row of (index, v) in costs as (D * H, W)
         rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], dst=stack_row)
-        if h_px * n < 32000:  # remap converts coordinates to int16
+        if self.rolling:
+            np.copyto(key_minus, self.minus_run[sl])
+            np.copyto(key_plus, self.plus_run[sl])
+        elif h_px * n < 32000:  # remap converts coordinates to int16
             stacked = self.costs.reshape(n * h_px, w_px)
             for key, shift in ((key_minus, -float(h_px)), (key_plus, float(h_px))):
                 cv2.remap(
@@ -223,6 +285,20 @@ class Engine:
         cv2.min(far, self.second[2, sl], dst=far)
         cv2.min(far, top, dst=far)
         return self.cost[sl], cost_minus, cost_plus, np.floor(far, out=far)
+
+
+def _carry_neighbours(key: np.ndarray, views: tuple, a: int, b: int) -> None:
+    """Rolling search, rows ``a:b`` of one disparity: where the previous disparity became the running best, ``key``
+    is its right neighbour's; where this one does, the previous key is its left neighbour's."""
+    prev, best, minus, plus, updated, updated_prev, u_edge, updated_prev_full, plus_full = views
+    cv2.copyTo(key, updated_prev[a:b], plus[a:b])
+    new = cv2.compare(key, best[a:b], cv2.CMP_LT, dst=updated[a:b])
+    cv2.copyTo(prev[a:b], new, minus[a:b])
+    cv2.min(best[a:b], key, dst=best[a:b])
+    if u_edge >= 0:  # the previous disparity's last column is out of this one's reach: no right neighbour there
+        edge = updated_prev_full[a:b, u_edge] != 0
+        if edge.any():
+            plus_full[a:b, u_edge][edge] = NO_MATCH
 
 
 def _row_bands(window: RowWindow, num_disparities: int, merge_gap: int = 40) -> list[list[tuple[int, int]]]:

@@ -111,6 +111,9 @@ def stereo_cases(result: dict) -> list[Case]:
             f"bad-1px {100 * result['ours_bad1']:.2f} % >= StereoBM {100 * result['stereobm_bad1']:.2f} %",
         ),  # fmt: skip
     ]
+    for key in sorted(k for k in result if k.startswith("ratio_")):
+        res, ratio = key.removeprefix("ratio_"), result[key]
+        out.append(case(f"speed vs StereoBM @{res} px", "bench.stereo", ratio <= bar, f"ratio {ratio:.2f} > {bar:g}"))
     return out
 
 

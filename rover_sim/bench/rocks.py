@@ -19,7 +19,11 @@ terrain's rock list and the simulator's true poses:
 * matching: fraction of matches between the same generated rock, over all site pairs up to 26 m apart, and the
   site-to-site position error in % of the separation (worst pair);
 * chain: mean position error over the sites after the first, dead reckoning vs VO vs adjusted (the pose-graph
-  fusion of the VO legs and the rock transforms, :class:`nav.rocks.SiteChain`).
+  fusion of the VO legs and the rock transforms, :class:`nav.rocks.SiteChain`);
+* by rock class (``--irregular-fraction``: that fraction of the generated rocks are irregular,
+  :mod:`terrains.rock_shapes`, outside the four models): recall, precision and median model RMS separately for the
+  analytic and the irregular rocks. An extracted rock counts for the class of the generated rock it is associated
+  with; a false one for the class of the nearest generated rock. Model-type agreement is over analytic rocks only.
 """
 
 from __future__ import annotations
@@ -40,10 +44,13 @@ from rover_sim.mission.survey import (
     RockSiteSurvey,
     SurveyConfig,
     adjust_chain,
+    associate,
     evaluate_chain,
     evaluate_extraction,
     evaluate_match,
+    rocks_in_true_frame,
 )
+from terrains import Terrain, rock_class
 
 SCENARIO = "rock_localization"
 MAX_MATCH_SEPARATION_M = 26.0
@@ -55,11 +62,18 @@ def bench_rocks(
     scenario: str = SCENARIO,
     config: SurveyConfig = SurveyConfig(),
     seed: int | None = None,
+    irregular_fraction: float | None = None,
 ) -> dict:
     """Run the survey, print the markdown tables, write ``json_path`` (if given) and return the results.
-    ``seed`` replaces the scenario's (another rock field along the same legs: a held-out check)."""
+    ``seed`` replaces the scenario's (another rock field along the same legs: a held-out check);
+    ``irregular_fraction`` replaces ``terrain.rocks.irregular_fraction`` (irregular rocks mixed in)."""
     t0 = time.perf_counter()
     sc = load_scenario(scenario, seed=seed)
+    if irregular_fraction is not None:
+        rocks = sc.terrain.rocks.model_validate(
+            sc.terrain.rocks.model_dump() | {"irregular_fraction": irregular_fraction}
+        )
+        sc = sc.model_copy(update={"terrain": sc.terrain.model_copy(update={"rocks": rocks})})
 
     def progress(msg: str) -> None:
         print(f"  [{time.perf_counter() - t0:6.0f} s] {msg}", flush=True)
@@ -99,11 +113,13 @@ def bench_rocks(
             "vo": float(np.mean(ce.vo[1:])),
             "adjusted": float(np.mean(ce.adjusted[1:])),
         },
-        "model_type_match_frac": float(np.mean(total.type_match)) if total.type_match else float("nan"),
+        "model_type_match_frac": _analytic_frac(total, well_only=False),
         "model_type_match_frac_well_observed": _well_observed_frac(total),
         # extras
-        "model_type_count": len(total.type_match),
-        "model_type_well_observed_count": int(np.sum(total.well_observed)),
+        "irregular_fraction": sc.terrain.rocks.irregular_fraction,
+        "by_rock_class": _by_class(sites, terrain),
+        "model_type_count": int(np.sum(_analytic(total))),
+        "model_type_well_observed_count": int(np.sum(_analytic(total) & np.asarray(total.well_observed, bool))),
         "model_type_match_by_range": _by_range(total),
         "model_type_confusion": _confusion(total.shapes),
         "model_type_confusion_well_observed": _confusion(
@@ -154,9 +170,62 @@ def bench_rocks(
     return result
 
 
+def _by_class(sites: list, terrain: Terrain, max_range_m: float = 30.0, min_height_m: float = 0.2) -> dict:
+    """Recall, precision and median model RMS per rock class ("analytic", "irregular"), summed over the sites (the
+    same targets and association as :func:`rover_sim.mission.survey.evaluate_extraction`)."""
+    truth = terrain.rocks
+    classes = np.array([rock_class(r) for r in truth])
+    txy = np.array([[r.x_m, r.y_m] for r in truth]).reshape(-1, 2)
+    counts = {
+        c: {"n_true": 0, "n_found": 0, "n_extracted": 0, "n_correct": 0, "rms_m": []} for c in ("analytic", "irregular")
+    }
+    for site in sites:
+        idx = associate(site, truth)
+        cam = site.T_world_rover_true[:2, 3]
+        t_range = np.linalg.norm(txy - cam, axis=1)
+        target = (t_range <= max_range_m) & np.array([r.height_m > min_height_m for r in truth])
+        found = {int(i) for i in idx if i >= 0}
+        for i in np.flatnonzero(target):
+            counts[classes[i]]["n_true"] += 1
+            counts[classes[i]]["n_found"] += int(int(i) in found)
+        est = rocks_in_true_frame(site)
+        for k, i in enumerate(idx):
+            if np.linalg.norm(est[k, :2] - cam) > max_range_m:
+                continue
+            nearest = i if i >= 0 else int(np.argmin(np.linalg.norm(txy - est[k, :2], axis=1)))
+            c = counts[classes[nearest]]
+            c["n_extracted"] += 1
+            c["n_correct"] += int(i >= 0)
+            if i >= 0 and target[i]:
+                c["rms_m"].append(float(site.rocks[k].model.rms_m))
+    out = {}
+    for name, c in counts.items():
+        out[name] = {
+            "recall": c["n_found"] / c["n_true"] if c["n_true"] else float("nan"),
+            "precision": c["n_correct"] / c["n_extracted"] if c["n_extracted"] else float("nan"),
+            "median_rms_m": float(np.median(c["rms_m"])) if c["rms_m"] else float("nan"),
+            "n_true": c["n_true"],
+            "n_found": c["n_found"],
+            "n_extracted": c["n_extracted"],
+            "n_correct": c["n_correct"],
+        }
+    return out
+
+
+def _analytic(e: ExtractionEval) -> np.ndarray:
+    """Which of the evaluated rocks were generated by one of the four analytic shapes (model type is defined)."""
+    return np.array([true in ROCK_SHAPES for true, _ in e.shapes], dtype=bool).reshape(-1)
+
+
+def _analytic_frac(e: ExtractionEval, well_only: bool) -> float:
+    sel = _analytic(e) & (np.asarray(e.well_observed, bool) if well_only else True)
+    t = np.asarray(e.type_match, dtype=bool)[sel]
+    return float(np.mean(t)) if t.size else float("nan")
+
+
 def _by_range(e: ExtractionEval) -> dict[str, float]:
-    r = np.asarray(e.range_m)
-    t = np.asarray(e.type_match, dtype=float)
+    r = np.asarray(e.range_m)[_analytic(e)]
+    t = np.asarray(e.type_match, dtype=float)[_analytic(e)]
     out = {}
     for lo, hi in ((0, 10), (10, 20), (20, 30)):
         sel = (r >= lo) & (r < hi)
@@ -165,15 +234,15 @@ def _by_range(e: ExtractionEval) -> dict[str, float]:
 
 
 def _well_observed_frac(e: ExtractionEval) -> float:
-    t = [m for m, w in zip(e.type_match, e.well_observed, strict=True) if w]
-    return float(np.mean(t)) if t else float("nan")
+    return _analytic_frac(e, well_only=True)
 
 
 def _confusion(shapes: list[tuple[str, str]]) -> list[list[int]]:
     """Rows: generating shape, columns: chosen model, both in ``ROCK_SHAPES`` order."""
     m = np.zeros((len(ROCK_SHAPES), len(ROCK_SHAPES)), dtype=int)
     for true, chosen in shapes:
-        m[ROCK_SHAPES.index(true), ROCK_SHAPES.index(chosen)] += 1
+        if true in ROCK_SHAPES:  # irregular rocks have no model type
+            m[ROCK_SHAPES.index(true), ROCK_SHAPES.index(chosen)] += 1
     return m.tolist()
 
 
@@ -218,6 +287,13 @@ def _print(result: dict, per_site: list[ExtractionEval], pairs: list[MatchEval])
     best = c["adjusted"] < min(c["dead_reckoning"], c["vo"])
     print(f"| chain: mean site error DR / VO / adjusted | {c['dead_reckoning']:.3f} / {c['vo']:.3f} / "
           f"{c['adjusted']:.3f} m | adjusted lowest | {ok(best)} |")  # fmt: skip
+    print()
+    print(f"| rock class (irregular fraction {result['irregular_fraction']:g}) | recall | precision | "
+          "median model RMS |")  # fmt: skip
+    print("|---|---:|---:|---:|")
+    for name, c in result["by_rock_class"].items():
+        print(f"| {name} | {c['recall']:.3f} ({c['n_found']}/{c['n_true']}) | {c['precision']:.3f} "
+              f"({c['n_correct']}/{c['n_extracted']}) | {100 * c['median_rms_m']:.2f} cm |")  # fmt: skip
     print()
     short = [name.replace("_", "-") for name in ROCK_SHAPES]
     for title, key in (("all", "model_type_confusion"), ("well-observed", "model_type_confusion_well_observed")):

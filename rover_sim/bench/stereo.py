@@ -1,9 +1,15 @@
 """`rover-sim bench stereo`: MER SAD stereo vs plain OpenCV StereoBM on simulated hazcam pairs with ground truth.
 
-Pairs are rendered at 256x256 from the front hazcams on seeded sand and bedrock terrains with rocks; ground-truth
-disparity ``fx B / Z`` comes from the rendered depth. Scored pixels: terrain or rock (not the rover itself) with
-ground-truth depth within 3 m. ``density`` = fraction of scored pixels that get a disparity; ``bad1`` = fraction of
-those more than 1 px off. Both algorithms run on the same pairs in the same process; time is the median per pair.
+Pairs are rendered at 256x256 (MER's binned navigation images) and at 1024x1024 (full resolution) from the front
+hazcams on seeded sand and bedrock terrains with rocks; ground-truth disparity ``fx B / Z`` comes from the rendered
+depth. Scored pixels: terrain or rock (not the rover itself) with ground-truth depth within 3 m. ``density`` =
+fraction of scored pixels that get a disparity; ``bad1`` = fraction of those more than 1 px off. Both algorithms run
+on the same pairs in the same process, their runs interleaved (the machine may be shared); time is the median of
+the per-pair medians.
+
+The pairs come from :func:`pairs_for_profile` (the sensor profile's seam): ``"ideal"`` renders rectified pinhole
+pairs directly; ``"flight"`` needs the raw (distorted) rendering and onboard rectification, and says so until they
+are available.
 """
 
 from __future__ import annotations
@@ -16,6 +22,7 @@ import numpy as np
 from nav.camera import StereoRig
 from nav.stereo import StereoParams, compute_disparity, stereobm_baseline
 from rover_sim.bench import write_json
+from rover_sim.errors import ConfigError
 from rover_sim.mission import acceptance
 from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
 from rover_sim.sim.physics import RoverSim
@@ -23,6 +30,18 @@ from terrains import MaterialSpec, RockSpec, RoughnessSpec, TerrainRecipe, synth
 
 MAX_RANGE_M = 3.0
 NUM_DISPARITIES = 32  # hazcam at 256^2: fx ~68 px, B 0.1 m -> 0.35 m range at 20 px
+RESOLUTIONS_PX = (256, 1024)
+PROFILES = ("ideal", "flight")
+
+
+def params_for(resolution_px: int) -> StereoParams:
+    """The 256 px parameters (32 disparities) scaled to ``resolution_px`` (:meth:`StereoParams.for_resolution`)."""
+    return StereoParams(num_disparities=NUM_DISPARITIES).for_resolution(resolution_px)
+
+
+def num_disparities(resolution_px: int) -> int:
+    """The same range in metres at every resolution: 32 at 256 px, 128 at 1024 px (a multiple of 16)."""
+    return params_for(resolution_px).num_disparities
 
 
 @dataclass(frozen=True)
@@ -34,7 +53,24 @@ class SimPair:
     label: str
 
 
-def simulated_pairs(seeds=(0, 1, 2), materials=("sand", "bedrock"), pair: str = "hazcam_front") -> list[SimPair]:
+def pairs_for_profile(profile: str, resolution_px: int, seeds=(0, 1, 2)) -> list[SimPair]:
+    """The rectified pairs ``bench stereo`` scores for a sensor profile (``[sensors] profile``)."""
+    if profile == "ideal":
+        return simulated_pairs(seeds, resolution_px=resolution_px)
+    if profile == "flight":
+        # seam: the flight profile renders raw (distorted) images and rectifies them onboard (issue #16 item 1)
+        raise ConfigError(
+            "bench stereo",
+            "--profile",
+            "flight: raw->rectified pairs need the lens models and onboard rectification, which this build does not "
+            "have; use --profile ideal",
+        )
+    raise ConfigError("bench stereo", "--profile", f"{profile!r}: use one of {', '.join(PROFILES)}")
+
+
+def simulated_pairs(
+    seeds=(0, 1, 2), materials=("sand", "bedrock"), pair: str = "hazcam_front", resolution_px: int = 256
+) -> list[SimPair]:
     out = []
     for material in materials:
         for seed in seeds:
@@ -48,7 +84,7 @@ def simulated_pairs(seeds=(0, 1, 2), materials=("sand", "bedrock"), pair: str = 
             terrain = synthesize(recipe, seed)
             sim = RoverSim(terrain, texture_rgb=terrain_texture(terrain, 100.0, seed))
             sim.place(0.0, 0.0, float(seed) * 1.3, settle_s=0.5)
-            with StereoRenderer(sim, RenderConfig(resolution_px=256, noise=ImageNoise(seed=seed))) as r:
+            with StereoRenderer(sim, RenderConfig(resolution_px=resolution_px, noise=ImageNoise(seed=seed))) as r:
                 frame = r.render_pair(pair)
                 depth = r.render_depth(f"{pair}_left")
                 seg = r.render_segmentation(f"{pair}_left")
@@ -58,7 +94,8 @@ def simulated_pairs(seeds=(0, 1, 2), materials=("sand", "bedrock"), pair: str = 
             body_of = np.where(valid_ids, m.geom_bodyid[np.clip(seg, 0, None)], -1)
             ground = valid_ids & (body_of == 0)  # world body: terrain and rocks, not the rover
             gt = np.where(ground & (depth <= MAX_RANGE_M), frame.rig.disparity_from_depth(depth), np.nan)
-            out.append(SimPair(frame.left, frame.right, gt.astype(np.float32), frame.rig, f"{material}/{seed}"))
+            label = f"{material}/{seed}" + ("" if resolution_px == 256 else f" @{resolution_px}")
+            out.append(SimPair(frame.left, frame.right, gt.astype(np.float32), frame.rig, label))
     return out
 
 
@@ -71,36 +108,48 @@ def score(disparity: np.ndarray, gt: np.ndarray) -> tuple[float, float]:
     return float(density), float(bad)
 
 
-def _time_ms(fn, repeats: int = 15) -> float:
-    fn()  # warm-up (workspace allocation)
-    t = []
+def _time_pair_ms(fns: tuple, repeats: int) -> list[float]:
+    """Median time (ms) of each function, their runs interleaved (after one warm-up run each)."""
+    for fn in fns:
+        fn()  # warm-up (workspace allocation)
+    times: list[list[float]] = [[] for _ in fns]
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        t.append((time.perf_counter() - t0) * 1e3)
-    return float(np.median(t))
+        for fn, t in zip(fns, times, strict=True):
+            t0 = time.perf_counter()
+            fn()
+            t.append((time.perf_counter() - t0) * 1e3)
+    return [float(np.median(t)) for t in times]
 
 
-def bench_stereo(json_path: str | None = None, plugins: list[str] | None = None) -> dict:
-    """MER SAD vs StereoBM on the simulated pairs, then each plugin matcher (``plugins``) on the same pairs."""
-    pairs = simulated_pairs()
-    params = StereoParams(num_disparities=NUM_DISPARITIES)
+def _rows(pairs: list[SimPair], resolution_px: int, repeats: int) -> list[dict]:
+    params = params_for(resolution_px)
+    n_disp = params.num_disparities
     rows = []
     for p in pairs:
         ours = compute_disparity(p.left, p.right, params)
-        bm = stereobm_baseline(p.left, p.right, NUM_DISPARITIES, params.window_px)
+        bm = stereobm_baseline(p.left, p.right, n_disp, params.window_px)
+        ours_ms, bm_ms = _time_pair_ms(
+            (
+                lambda p=p: compute_disparity(p.left, p.right, params),
+                lambda p=p: stereobm_baseline(p.left, p.right, n_disp, params.window_px),
+            ),
+            repeats,
+        )
         rows.append(
             {
                 "pair": p.label,
+                "resolution_px": resolution_px,
                 "ours": score(ours, p.gt_disparity_px),
                 "stereobm": score(bm, p.gt_disparity_px),
-                "ours_ms": _time_ms(lambda p=p: compute_disparity(p.left, p.right, params)),
-                "stereobm_ms": _time_ms(
-                    lambda p=p: stereobm_baseline(p.left, p.right, NUM_DISPARITIES, params.window_px)
-                ),
+                "ours_ms": ours_ms,
+                "stereobm_ms": bm_ms,
             }
         )
-    agg = {
+    return rows
+
+
+def _aggregate(rows: list[dict]) -> dict:
+    return {
         "ours_ms": float(np.median([r["ours_ms"] for r in rows])),
         "stereobm_ms": float(np.median([r["stereobm_ms"] for r in rows])),
         "ours_bad1": float(np.mean([r["ours"][1] for r in rows])),
@@ -108,30 +157,66 @@ def bench_stereo(json_path: str | None = None, plugins: list[str] | None = None)
         "ours_density": float(np.mean([r["ours"][0] for r in rows])),
         "stereobm_density": float(np.mean([r["stereobm"][0] for r in rows])),
     }
-    print("| pair | ours density | ours bad-1px | StereoBM density | StereoBM bad-1px | ours ms | StereoBM ms |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+
+
+def _print_table(rows: list[dict], agg: dict, label: str) -> None:
     for r in rows:
         print(
             f"| {r['pair']} | {100 * r['ours'][0]:.1f} % | {100 * r['ours'][1]:.2f} % | {100 * r['stereobm'][0]:.1f} % "
             f"| {100 * r['stereobm'][1]:.2f} % | {r['ours_ms']:.1f} | {r['stereobm_ms']:.1f} |"
         )
-    ratio = agg["ours_ms"] / agg["stereobm_ms"]
     print(
-        f"| **all** | {100 * agg['ours_density']:.1f} % | {100 * agg['ours_bad1']:.2f} % | "
+        f"| **{label}** | {100 * agg['ours_density']:.1f} % | {100 * agg['ours_bad1']:.2f} % | "
         f"{100 * agg['stereobm_density']:.1f} % | {100 * agg['stereobm_bad1']:.2f} % | {agg['ours_ms']:.1f} | "
         f"{agg['stereobm_ms']:.1f} |"
     )
-    print(
-        f"\nspeed ratio ours/StereoBM = {ratio:.2f} (acceptance <= {acceptance.STEREO.max_time_ratio}); "
-        "lower bad-1px than StereoBM: "
-        f"{'yes' if agg['ours_bad1'] < agg['stereobm_bad1'] else 'NO'}"
-    )
-    agg["ratio"] = ratio
-    agg["passed"] = bool(ratio <= acceptance.STEREO.max_time_ratio and agg["ours_bad1"] < agg["stereobm_bad1"])
+
+
+def bench_stereo(
+    json_path: str | None = None,
+    plugins: list[str] | None = None,
+    profile: str = "ideal",
+    resolutions_px: tuple[int, ...] = RESOLUTIONS_PX,
+    repeats: int = 9,
+) -> dict:
+    """MER SAD vs StereoBM on the profile's pairs at each resolution (256 px first: the headline keys), then each
+    plugin matcher (``plugins``) on the 256 px pairs."""
+    if not resolutions_px or resolutions_px[0] != 256:
+        raise ValueError(f"bench stereo resolutions {resolutions_px}: the first must be 256 (the headline)")
+    bar = acceptance.STEREO.max_time_ratio
+    print(f"sensor profile: {profile}")
+    print("| pair | ours density | ours bad-1px | StereoBM density | StereoBM bad-1px | ours ms | StereoBM ms |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    all_rows, per_res, pairs_256 = [], {}, []
+    for res in resolutions_px:
+        pairs = pairs_for_profile(profile, res)
+        pairs_256 = pairs_256 or pairs
+        rows = _rows(pairs, res, repeats)
+        per_res[res] = _aggregate(rows)
+        _print_table(rows, per_res[res], f"all @{res}")
+        all_rows += rows
+    agg = dict(per_res[256])
+    agg["ratio"] = agg["ours_ms"] / agg["stereobm_ms"]
+    for res, a in per_res.items():
+        if res == 256:
+            continue
+        for key, value in a.items():
+            agg[f"{key}_{res}"] = value
+        agg[f"ratio_{res}"] = a["ours_ms"] / a["stereobm_ms"]
+    ratios = {res: (agg["ratio"] if res == 256 else agg[f"ratio_{res}"]) for res in per_res}
+    for res, ratio in ratios.items():
+        print(f"speed ratio ours/StereoBM @{res} px = {ratio:.2f} (acceptance <= {bar})")
+    print(f"lower bad-1px than StereoBM (256 px): {'yes' if agg['ours_bad1'] < agg['stereobm_bad1'] else 'NO'}")
+    agg["profile"] = profile
+    agg["passed"] = bool(all(r <= bar for r in ratios.values()) and agg["ours_bad1"] < agg["stereobm_bad1"])
     if plugins:
-        agg["plugins"] = {name: _plugin_rows(name, pairs, agg["stereobm_ms"]) for name in plugins}
-    write_json(json_path, agg | {"rows": rows})
+        agg["plugins"] = {name: _plugin_rows(name, pairs_256, agg["stereobm_ms"]) for name in plugins}
+    write_json(json_path, agg | {"rows": all_rows})
     return agg
+
+
+def _time_ms(fn, repeats: int = 15) -> float:
+    return _time_pair_ms((fn,), repeats)[0]
 
 
 def _plugin_rows(name: str, pairs: list[SimPair], stereobm_ms: float) -> dict:

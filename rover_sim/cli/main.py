@@ -107,14 +107,15 @@ def bench_stereo_cmd(
         list[str] | None, typer.Option("--stereo", help=f"Also run this stereo matcher ({_IMPL}); repeatable.")
     ] = None,
     junit: JunitOpt = None,
+    profile: Annotated[str, typer.Option("--profile", help="Sensor profile of the pairs: ideal | flight.")] = "ideal",
 ) -> None:
-    """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px);
-    any --stereo plugin on the same pairs."""
+    """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px) at
+    256x256 and 1024x1024; any --stereo plugin on the same 256 px pairs."""
     with guarded():
         from rover_sim.bench.junit_cases import stereo_cases
         from rover_sim.bench.stereo import bench_stereo
 
-        r = bench_stereo(str(json) if json else None, plugins=stereo or None)
+        r = bench_stereo(str(json) if json else None, plugins=stereo or None, profile=profile)
     finish(junit, "bench stereo", stereo_cases(r))
 
 
@@ -179,13 +180,18 @@ def bench_rocks_cmd(
     json: JsonOpt = None,
     seed: Annotated[int | None, typer.Option(help="Replace the scenario seed (another rock field).")] = None,
     junit: JunitOpt = None,
+    irregular_fraction: Annotated[
+        float | None,
+        typer.Option("--irregular-fraction", min=0.0, max=1.0, help="Fraction of irregular rocks (0..1)."),
+    ] = None,
 ) -> None:
-    """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO."""
+    """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
+    figures by rock class (analytic / irregular) with --irregular-fraction."""
     with guarded():
         from rover_sim.bench.junit_cases import rocks_cases
         from rover_sim.bench.rocks import bench_rocks
 
-        result = bench_rocks(str(json) if json else None, seed=seed)
+        result = bench_rocks(str(json) if json else None, seed=seed, irregular_fraction=irregular_fraction)
     finish(junit, "bench rocks", rocks_cases(result))
 
 

@@ -198,3 +198,23 @@ def test_bench_rocks_meets_the_acceptance(tmp_path) -> None:
     assert result["model_type_match_frac_well_observed"] >= ACCEPT["model_type_match_frac_well_observed"]
     chain = result["chain_error_m"]
     assert chain["adjusted"] < min(chain["dead_reckoning"], chain["vo"])
+
+
+def test_bench_rocks_splits_the_figures_by_rock_class(eval_terrain) -> None:
+    """Recall, precision and RMS per class: a false rock counts for the class of the nearest generated rock."""
+    import dataclasses
+
+    from rover_sim.bench.rocks import _by_class
+    from terrains.rock_shapes import make_irregular
+
+    rocks = list(eval_terrain.rocks)
+    rocks[1], rocks[2] = make_irregular([rocks[1], rocks[2]], 1.0, ("angular_block",), np.random.default_rng(0))
+    terrain = dataclasses.replace(eval_terrain, rocks=rocks)
+    true_T = yaw_pose(0.0, 0.0, 0.5, 0.3)
+    site = fake_site(terrain, 0, true_T, true_T, keep=[0, 1, 3], extra_xy=[(-3.0, 6.0)])
+    by = _by_class([site], terrain)
+    assert (by["analytic"]["n_true"], by["analytic"]["n_found"]) == (2, 1)  # r0 found, r4 missed (r3 < 20 cm)
+    assert (by["irregular"]["n_true"], by["irregular"]["n_found"]) == (2, 1)  # r1 found, r2 missed
+    assert (by["analytic"]["n_correct"], by["analytic"]["n_extracted"]) == (2, 2)  # r0, r3
+    assert (by["irregular"]["n_correct"], by["irregular"]["n_extracted"]) == (1, 2)  # r1, and the false one near r1
+    assert by["irregular"]["median_rms_m"] == pytest.approx(0.02)

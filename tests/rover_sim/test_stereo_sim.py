@@ -136,6 +136,32 @@ def test_load_grey_conversions_and_rejections(tmp_path: Path) -> None:
     with pytest.raises(StereoInputError, match="text.png"):
         load_grey(tmp_path / "text.png")
     big = tmp_path / "big.png"
-    cv2.imwrite(str(big), np.zeros((1024, 1024), np.uint8))
+    cv2.imwrite(str(big), np.zeros((8, 5000), np.uint8))  # beyond 4096 px a side (1024^2 is fine)
     with pytest.raises(StereoInputError, match="big.png.*bin it"):
         disparity_from_files(big, big)
+
+
+def test_bench_stereo_pairs_come_from_the_sensor_profile() -> None:
+    """The profile seam: "ideal" renders rectified pairs, "flight" says what it needs, anything else is refused."""
+    from rover_sim.bench.stereo import num_disparities, pairs_for_profile
+    from rover_sim.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="'--profile': flight"):
+        pairs_for_profile("flight", 256)
+    with pytest.raises(ConfigError, match="ideal, flight"):
+        pairs_for_profile("pinhole", 256)
+    assert (num_disparities(256), num_disparities(1024)) == (NUM_DISPARITIES, 4 * NUM_DISPARITIES)  # same metres
+
+
+@pytest.mark.render
+def test_rendered_1024_pair_matches_its_depth() -> None:
+    """Full-resolution (1024^2) hazcam pair: dense and within 1 px of the rendered depth's disparity."""
+    from rover_sim.bench.stereo import params_for
+
+    (pair,) = simulated_pairs(seeds=(3,), materials=("sand",), resolution_px=1024)
+    params = params_for(1024)
+    assert params == StereoParams(num_disparities=128, bandpass_sigma_fine_px=1.2, bandpass_sigma_coarse_px=5.0)
+    density, bad1 = score(compute_disparity(pair.left, pair.right, params), pair.gt_disparity_px)
+    bm_density, bm_bad1 = score(stereobm_baseline(pair.left, pair.right, 128, 9), pair.gt_disparity_px)
+    assert density >= 0.75 and bad1 <= 0.015, (density, bad1)
+    assert bad1 < bm_bad1, (bad1, bm_bad1)
