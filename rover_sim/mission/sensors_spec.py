@@ -15,11 +15,14 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from rover_sim.mission.lens_spec import LensErrorSpec
+
 Profile = Literal["flight", "ideal"]
 DEFAULT_PROFILE: Profile = "ideal"
 
 #: sub-table name -> model class (with ``profile_defaults(profile) -> dict``); filled as error families land
 SUBTABLES: dict[str, type[BaseModel]] = {}
+SUBTABLES["lens"] = LensErrorSpec
 
 
 class SensorsSpec(BaseModel):
@@ -28,6 +31,7 @@ class SensorsSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, validate_default=True)
 
     profile: Profile = Field(DEFAULT_PROFILE, description="'flight' (errors as flown) or 'ideal' (none).")
+    lens: LensErrorSpec = Field(default_factory=LensErrorSpec, description="lens models, calibration, mast encoders")
 
     @model_validator(mode="before")
     @classmethod

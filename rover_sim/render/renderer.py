@@ -47,6 +47,7 @@ import numpy as np
 from nav.camera import PinholeCamera, StereoRig
 from rover_sim.errors import RenderingUnavailable
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
+from rover_sim.render.lens import IdentityLens, TrueLens, pair_of
 from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles: re-exported from here
     GROUP_HIDDEN,
     GROUP_SHOWN,
@@ -280,7 +281,7 @@ def _geom_id_map(render_model: mujoco.MjModel, phys_model: mujoco.MjModel) -> np
 class RenderWorld:
     """The physics model plus render-only geometry, with its own MjData kept in step with the simulation's."""
 
-    def __init__(self, sim: RoverSim, config: RenderConfig) -> None:
+    def __init__(self, sim: RoverSim, config: RenderConfig, offscreen_px: int = 0) -> None:
         self.sim, self.config = sim, config
         spec = sim.spec.copy()
         self.tiles = add_terrain_tiles(
@@ -299,7 +300,7 @@ class RenderWorld:
         vis.quality.offsamples = config.multisamples
         vis.quality.numslices, vis.quality.numstacks = config.builtin_slices, config.builtin_stacks
         vis.map.shadowclip = config.shadow_half_extent_m / spec.stat.extent
-        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024)  # render_rgb up to 1024
+        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024, offscreen_px)  # render_rgb up to 1024
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         if self.model.nq != sim.model.nq or self.model.nbody != sim.model.nbody:
@@ -414,11 +415,12 @@ class StereoRenderer:
     model, so :meth:`rig` equals :func:`rover_sim.render.cameras.stereo_rig` at the output resolution.
     """
 
-    def __init__(self, sim: RoverSim, config: RenderConfig | None = None) -> None:
+    def __init__(self, sim: RoverSim, config: RenderConfig | None = None, lens: TrueLens | None = None) -> None:
         check_gl()
         self.config = config or RenderConfig()
         self.sim = sim
-        self.world = RenderWorld(sim, self.config)
+        self.lens = lens or IdentityLens()  # the true lenses (flight profile): raw images from a wider pinhole view
+        self.world = RenderWorld(sim, self.config, self.lens.max_render_px)
         self.shadows = self.config.shadows and sim.sun.shadows  # switch per render: ``renderer.shadows = False``
         self._renderers: dict[int, mujoco.Renderer] = {}
         self._rng = np.random.default_rng(self.config.noise.seed) if self.config.noise else None
@@ -486,20 +488,25 @@ class StereoRenderer:
         self._right_cam.fixedcamid = self.world.model.camera(cam_name).id
         mujoco.mjv_updateCamera(self.world.model, self.world.data, self._right_cam, r.scene)
 
-    def _grey(self, rgb: np.ndarray) -> np.ndarray:
-        luma = bin_average(rgb.astype(np.float32) @ LUMA_WEIGHTS, self.config.binning)
+    def _grey(self, rgb: np.ndarray, cam_name: str) -> np.ndarray:
+        luma = self.lens.to_raw(rgb.astype(np.float32) @ LUMA_WEIGHTS, cam_name)
+        luma = bin_average(luma, self.config.binning)
         return quantise(luma, self.config.noise, self._rng)
 
     # -- public renders
     def render_pair(self, pair: str = "navcam") -> StereoFrame:
-        """Greyscale stereo pair (uint8, ``resolution_px`` square) of ``pair`` at the simulation's current state."""
+        """Greyscale stereo pair (uint8, ``resolution_px`` square) of ``pair`` at the simulation's current state.
+
+        With a :class:`~rover_sim.render.lens.TrueLens` the images are raw (distorted, unrectified) and ``rig`` is
+        still the MJCF pinhole rig (the render geometry, not a model of the raw images)."""
         if pair not in STEREO_PAIRS:
             raise ValueError(f"unknown stereo pair {pair!r}; choose one of {STEREO_PAIRS}")
         names = [f"{pair}_left", f"{pair}_right"]
-        r = self._scene_for(names, self.config.native_px)
-        left = self._grey(r.render())
-        self._switch_camera(r, names[1])
-        right = self._grey(r.render())
+        with self.lens.view(self.world.model, pair, self.config.native_px) as px:
+            r = self._scene_for(names, px)
+            left = self._grey(r.render(), names[0])
+            self._switch_camera(r, names[1])
+            right = self._grey(r.render(), names[1])
         return StereoFrame(self.sim.time_s, self.rig(pair), left, right, dict(self.last_drawn))
 
     def render_rgb(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
@@ -509,7 +516,8 @@ class StereoRenderer:
 
     def render_grey(self, cam_name: str) -> np.ndarray:
         """Greyscale image of one camera, processed like :meth:`render_pair` (binning, noise)."""
-        return self._grey(self._scene_for([cam_name], self.config.native_px).render())
+        with self.lens.view(self.world.model, pair_of(cam_name), self.config.native_px) as px:
+            return self._grey(self._scene_for([cam_name], px).render(), cam_name)
 
     def render_depth(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
         """(H, W) float32 z-depth in metres along the optical axis (OpenCV z) at pixel centres; inf = sky.
