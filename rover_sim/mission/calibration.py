@@ -5,7 +5,9 @@ One seeded draw per run (stream ``LENS_SEED_STREAM`` of the scenario seed) gives
 * the true mounting rotation of each camera relative to its MJCF camera (build tolerance; the true raw camera the
   renderer images through, :mod:`rover_sim.render.lens`);
 * the calibration errors: a rotation common to the pair, the right camera's rotation and position relative to the
-  left, and per camera focal length, principal point and distortion-coefficient errors.
+  left, a principal-point error common to the pair (a relative principal-point offset is indistinguishable from a
+  relative rotation, which the stereo calibration's epipolar constraint pins down: ``stereo_rotation_deg``), and
+  per camera focal length and distortion-coefficient errors.
 
 The onboard model of a camera is the true model (lens, mounting) at the **commanded** mast pointing with these
 errors applied. :class:`MastEncoders` draws, per repointing, where the mast truly stops (resolution + backlash).
@@ -61,15 +63,20 @@ class RunCalibration:
             common = rng.normal(0.0, d2r(spec.camera_rotation_deg), 3)
             relative = rng.normal(0.0, d2r(spec.stereo_rotation_deg), 3)
             baseline = rng.normal(0.0, spec.baseline_mm * 1e-3, 3)
+            principal = rng.normal(0.0, spec.principal_point_px, 2)  # common: the relative part is a rotation
             for side in ("left", "right"):
                 name = f"{pair}_{side}"
                 self.mount[name] = _rot(rng.normal(0.0, d2r(spec.mount_rotation_deg), 3))
-                rot = common if side == "left" else (Rotation.from_rotvec(relative) * Rotation.from_rotvec(common)).as_rotvec()
+                rot = (
+                    common
+                    if side == "left"
+                    else (Rotation.from_rotvec(relative) * Rotation.from_rotvec(common)).as_rotvec()
+                )
                 self.errors[name] = CameraErrors(
                     rotation_rad=rot,
                     position_m=np.zeros(3) if side == "left" else baseline,
                     focal_scale=1.0 + rng.normal(0.0, spec.focal_length_pct / 100.0),
-                    principal_px=rng.normal(0.0, spec.principal_point_px, 2),
+                    principal_px=principal,
                     distortion_scale=1.0 + rng.normal(0.0, spec.distortion_residual_pct / 100.0, 4),
                 )
 
@@ -92,8 +99,13 @@ class RunCalibration:
         dT = np.eye(4)
         dT[:3, :3], dT[:3, 3] = _rot(e.rotation_rad), e.position_m
         pp = e.principal_px * pinhole.width_px / FULL_RES_PX
-        changes: dict = dict(T_rover_cam=true.T_rover_cam @ dT, fx_px=true.fx_px * e.focal_scale,
-                             fy_px=true.fy_px * e.focal_scale, cx_px=true.cx_px + pp[0], cy_px=true.cy_px + pp[1])  # fmt: skip
+        changes: dict = {
+            "T_rover_cam": true.T_rover_cam @ dT,
+            "fx_px": true.fx_px * e.focal_scale,
+            "fy_px": true.fy_px * e.focal_scale,
+            "cx_px": true.cx_px + pp[0],
+            "cy_px": true.cy_px + pp[1],
+        }
         if isinstance(true, CahvorCamera):
             changes["r"] = tuple(float(c * s) for c, s in zip(true.r, e.distortion_scale[:3], strict=True))
         elif isinstance(true, FisheyeCamera):

@@ -30,14 +30,16 @@ mount_rotation_deg         0.2            true mounting error of each camera, pe
 camera_rotation_deg        0.05           calibration error of each camera's pointing, per axis, common to both
                                           cameras of a pair (MER navcam/hazcam pointing knowledge ~1 mrad,
                                           Maki 2003 calibration section; 0.05 deg = 0.9 mrad).
-stereo_rotation_deg        0.03           calibration error of the right camera relative to the left, per axis:
-                                          a stereo calibration with 0.1-0.3 px residuals at 1024^2 and a
-                                          ~1 mrad/px camera determines the relative rotation to 0.3-0.5 mrad
-                                          (issue #16 range 0.02-0.05 deg).
+stereo_rotation_deg        0.02           calibration error of the right camera relative to the left, per axis:
+                                          a stereo calibration leaves 0.1-0.3 px epipolar residuals at 1024^2
+                                          (0.82 mrad/px), i.e. 0.1-0.25 mrad of relative pitch; 0.02 deg =
+                                          0.35 mrad, the low end of the issue #16 range 0.02-0.05 deg. It moves
+                                          rectified rows by 0.11 px (1 sigma) at 256^2, 0.43 px at 1024^2.
 baseline_mm                0.3            calibration error of the right camera's position relative to the
                                           left, per axis (issue #16 range 0.2-0.5 mm; 0.15 % of 20 cm).
 focal_length_pct           0.05           relative focal-length error per camera (0.6 px at 1024^2 navcam).
-principal_point_px         0.5            principal-point error per axis, full-resolution (1024^2) pixels.
+principal_point_px         0.5            principal-point error per axis, full-resolution (1024^2) pixels,
+                                          common to both cameras of a pair (the relative part is a rotation).
 distortion_residual_pct    5              relative error of each distortion coefficient.
 mast_resolution_deg        0.05           pan/tilt encoder quantum: MER PMA actuators with resolvers/encoders
                                           behind 1000:1-class gearheads; pointing knowledge ~1 mrad (0.057 deg).
@@ -61,7 +63,7 @@ FLIGHT_DEFAULTS: dict[str, Any] = {
     "hazcam_k": (0.01, -0.002, 0.0, 0.0),
     "mount_rotation_deg": 0.2,
     "camera_rotation_deg": 0.05,
-    "stereo_rotation_deg": 0.03,
+    "stereo_rotation_deg": 0.02,
     "baseline_mm": 0.3,
     "focal_length_pct": 0.05,
     "principal_point_px": 0.5,

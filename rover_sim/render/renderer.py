@@ -300,7 +300,7 @@ class RenderWorld:
         vis.quality.offsamples = config.multisamples
         vis.quality.numslices, vis.quality.numstacks = config.builtin_slices, config.builtin_stacks
         vis.map.shadowclip = config.shadow_half_extent_m / spec.stat.extent
-        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024, offscreen_px)  # render_rgb up to 1024
+        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024, offscreen_px)  # + lens
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         if self.model.nq != sim.model.nq or self.model.nbody != sim.model.nbody:

@@ -98,7 +98,9 @@ def test_rectification_aligns_rows_of_a_misaligned_pair(name) -> None:
     """Raw cameras turned by 0.3 deg differently: points project to equal rows in the rectified rig, and the
     rectified pixel's table entry is where the raw model sees the point."""
     make = MODELS[name]
-    l_model = type(make(256))(**{**vars(make(256)), "name": "x_left", "T_rover_cam": _pose([0.3, -0.2, 0.1], [0, 0, 0])})
+    l_model = type(make(256))(
+        **{**vars(make(256)), "name": "x_left", "T_rover_cam": _pose([0.3, -0.2, 0.1], [0, 0, 0])}
+    )
     r_model = type(make(256))(**{**vars(make(256)), "name": "x_right",
                                  "T_rover_cam": _pose([-0.2, 0.3, -0.3], [0.2, 0.001, -0.002])})  # fmt: skip
     target = PinholeCamera.from_fov("x", 256, 256, 45.0 if name.startswith("cahvor") else 124.0)
@@ -126,8 +128,8 @@ def test_rectification_aligns_rows_of_a_misaligned_pair(name) -> None:
     np.testing.assert_allclose(table, expect, atol=2e-3)
     # and the point itself: the raw pixel of the table at the (sub-pixel) rectified position is the raw model's
     frac = uvl[ok] - np.stack([iu, iv], 1)
-    local = np.stack([cv2.remap(m, (iu + frac[:, 0]).astype(np.float32)[None], (iv + frac[:, 1]).astype(np.float32)[None],
-                                cv2.INTER_LINEAR)[0] for m in rect.left_map], 1)  # fmt: skip
+    su, sv = (iu + frac[:, 0]).astype(np.float32)[None], (iv + frac[:, 1]).astype(np.float32)[None]
+    local = np.stack([cv2.remap(m, su, sv, cv2.INTER_LINEAR)[0] for m in rect.left_map], 1)
     assert np.abs(local - raw_uv).max() < 0.05
 
 
