@@ -124,6 +124,7 @@ class MastEncoders:
         self.res, self.backlash = spec.mast_resolution_deg, spec.mast_backlash_deg
         self._rng = np.random.default_rng([int(seed), MAST_SEED_STREAM])
         self._last = np.zeros(2)
+        self.last_error_deg = np.zeros(2)  # (pan, elevation) error of the latest repointing (truth: evaluator only)
 
     def true_angles_deg(self, pan_deg: float, elevation_deg: float) -> tuple[float, float]:
         cmd = np.array([pan_deg, elevation_deg], dtype=float)
@@ -132,6 +133,7 @@ class MastEncoders:
         direction = np.sign(cmd - self._last)
         self._last = cmd
         err = self._rng.uniform(-0.5, 0.5, 2) * self.res - direction * self._rng.uniform(0.0, 1.0, 2) * self.backlash
+        self.last_error_deg = err
         return float(cmd[0] + err[0]), float(cmd[1] + err[1])
 
 

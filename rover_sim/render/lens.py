@@ -121,8 +121,9 @@ class TrueLens:
     def view(self, model: mujoco.MjModel, pair: str, native_px: int) -> Iterator[int]:
         """While drawing ``pair``: the render model's cameras take the wide view; yields the side to render."""
         v = self.views[pair]
-        if native_px != next(iter(v.maps.values()))[0].shape[0]:
-            raise ValueError(f"lens built for {v.maps} px images, asked for {native_px}")
+        built_px = next(iter(v.maps.values()))[0].shape[0]
+        if native_px != built_px:
+            raise ValueError(f"the true lens of {pair} was built for {built_px} px images, not {native_px}: rebuild it")
         ids = [model.camera(f"{pair}_{side}").id for side in ("left", "right")]
         saved = model.cam_fovy[ids].copy()
         model.cam_fovy[ids] = v.fovy_deg

@@ -30,6 +30,10 @@ Pixel values: luminance ``Y = 0.299 R + 0.587 G + 0.114 B`` of the rendered RGB;
 read noise is added in 12-bit counts, the signal is quantised to 12 bits (0-4095) and then scaled to 8 bits
 (MER downlinked 12-bit images; the navigation software used 8-bit ones).
 
+Lenses (``[sensors.lens]``, flight profile): with a :class:`~rover_sim.render.lens.TrueLens` the pair is rendered as
+a wider pinhole view and remapped into the true raw (distorted) cameras before binning and noise (one call in
+:meth:`StereoRenderer._grey`); without one (ideal profile) nothing changes.
+
 GL: ``MUJOCO_GL=egl`` (set by ``rover_sim/__init__``); each :class:`mujoco.Renderer` owns one EGL context.
 Never ``fork()`` a process after a context exists (spawn workers instead).
 """

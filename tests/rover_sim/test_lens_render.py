@@ -163,3 +163,46 @@ def test_mast_encoder_error_within_resolution_and_backlash() -> None:
         assert abs(true_pan - pan) <= bound and abs(true_el + 15.0) <= bound
     assert np.std(errs) > 0.005  # it does move the mast
     assert MastEncoders(LensErrorSpec(), 5).true_angles_deg(10.0, -15.0) == (10.0, -15.0)
+
+
+FIELD = {
+    "name": "lens_probe",
+    "terrain": {"size_m": [8, 8], "cell_size_m": 0.05, "rocks": {"cover_fraction": 0.0}},
+    "commands": [{"type": "drive", "distance_m": 0.1}],
+    "sensors": {"profile": "flight"},
+}
+
+
+def test_flight_world_points_the_mast_with_encoder_error_and_keeps_the_commanded_rig() -> None:
+    """The true mast stops off the command by the drawn encoder error; the onboard rig (rectified, from the
+    calibrated models) is built at the commanded angles; observations carry raw pairs that Onboard rectifies."""
+    from rover_sim.mission.calibration import cameras_at_pointing
+    from rover_sim.mission.onboard import Onboard
+    from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
+    from rover_sim.mission.scenario import scenario_from_dict
+    from rover_sim.mission.world import World
+
+    world = World(scenario_from_dict(FIELD))
+    try:
+        world.point_mast(25.0, -35.0)
+        world.sim.step(None, 1000)
+        rig = world.calibrate("navcam")
+        pan, tilt = np.degrees(world.sim.mast_angles_rad())
+        err = world.mast_encoders.last_error_deg
+        assert np.abs(err).max() > 1e-3
+        assert abs(pan - (25.0 + err[0])) < 0.01 and abs(-tilt - (-35.0 + err[1])) < 0.01
+        cmd = cameras_at_pointing(world.sim.model, world.sim.data, ["navcam_left"], 256, 25.0, -35.0)[0]
+        # the rectified rig sits at the commanded pointing (up to the calibration's own rotation errors)
+        cos = (np.trace(cmd.T_rover_cam[:3, :3].T @ rig.left.T_rover_cam[:3, :3]) - 1) / 2
+        assert np.degrees(np.arccos(min(1.0, cos))) < 0.5
+        obs = world.observation(("navcam",))
+        pair = obs.pair("navcam")
+        assert pair.calibration is not None and pair.rig is rig
+        nav = world.scenario.nav
+        onboard = Onboard(world.start_pose(), make_vo(nav.vo), make_stereo(nav.stereo), lambda: make_planner(nav.planner))
+        rect = onboard.rectified(obs, "navcam")
+        assert rect.calibration is None and rect.rig is rig and rect.left_u8.shape == (256, 256)
+        assert not np.array_equal(rect.left_u8, pair.left_u8)
+        assert onboard.rectified(obs, "navcam") is rect  # cached for the other uses of the same pair
+    finally:
+        world.close()
