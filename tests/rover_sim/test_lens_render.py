@@ -199,7 +199,9 @@ def test_flight_world_points_the_mast_with_encoder_error_and_keeps_the_commanded
         pair = obs.pair("navcam")
         assert pair.calibration is not None and pair.rig is rig
         nav = world.scenario.nav
-        onboard = Onboard(world.start_pose(), make_vo(nav.vo), make_stereo(nav.stereo), lambda: make_planner(nav.planner))
+        onboard = Onboard(
+            world.start_pose(), make_vo(nav.vo), make_stereo(nav.stereo), lambda: make_planner(nav.planner)
+        )
         rect = onboard.rectified(obs, "navcam")
         assert rect.calibration is None and rect.rig is rig and rect.left_u8.shape == (256, 256)
         assert not np.array_equal(rect.left_u8, pair.left_u8)
