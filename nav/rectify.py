@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from nav.camera import PinholeCamera, StereoRig
-from nav.lens import CameraModel
+from nav.lens import CahvorCamera, CameraModel
 
 CACHE_SIZE = 16  # calibrations kept (pairs x recent pointings)
 
@@ -41,6 +41,11 @@ class StereoCalibration:
     left: CameraModel
     right: CameraModel
     target: PinholeCamera  # intrinsics (size, fx, fy, cx, cy) of the rectified images; its pose is ignored
+
+    @staticmethod
+    def from_rig(rig: StereoRig) -> StereoCalibration:
+        """A pinhole rig as distortion-free CAHVOR models (its rectified rig is ``rig`` itself)."""
+        return StereoCalibration(CahvorCamera.from_pinhole(rig.left), CahvorCamera.from_pinhole(rig.right), rig.left)
 
     def key(self) -> str:
         """Digest of every parameter (identifies the calibration in the cache)."""

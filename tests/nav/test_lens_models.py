@@ -141,3 +141,6 @@ def test_error_free_calibration_reproduces_the_ideal_rig() -> None:
     np.testing.assert_allclose(rig.left.T_rover_cam, ideal.left.T_rover_cam, atol=1e-12)
     np.testing.assert_allclose(rig.right.T_rover_cam, ideal.right.T_rover_cam, atol=1e-12)
     np.testing.assert_allclose(rig.left.K, ideal.left.K)
+    back = rectified_rig(StereoCalibration.from_rig(ideal))  # StereoRig -> models -> StereoRig
+    np.testing.assert_allclose(back.right.T_rover_cam, ideal.right.T_rover_cam, atol=1e-12)
+    assert back.baseline_m == pytest.approx(0.2)
