@@ -23,8 +23,9 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from nav.camera import PinholeCamera
+from nav.camera import PinholeCamera, StereoRig
 from nav.lens import CahvorCamera, CameraModel, FisheyeCamera
+from nav.rectify import StereoCalibration, rectification
 from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model
 from rover_sim.render.lens import nominal_model, with_rotation
@@ -158,3 +159,16 @@ def build_true_lens(model: mujoco.MjModel, data: mujoco.MjData, calibration: Run
     names = [f"{p}_{s}" for p in STEREO_PAIRS for s in ("left", "right")]
     models = {n: calibration.render_model(camera_model(model, data, n, native_px, native_px)) for n in names}
     return TrueLens(models, calibration.spec)
+
+
+def render_rectified(renderer, calibration: RunCalibration, pair: str) -> tuple[np.ndarray, np.ndarray, StereoRig]:  # noqa: ANN001
+    """Render ``pair`` raw (``renderer`` built with this calibration's true lens, :func:`build_true_lens`) and
+    rectify it with the onboard models at the mast's current state: flight-profile pairs for benchmarks that run
+    outside a :class:`~rover_sim.mission.world.World` (e.g. ``bench stereo``). Returns (left, right, rig)."""
+    px = renderer.config.resolution_px
+    pins = [camera_model(renderer.sim.model, renderer.sim.data, f"{pair}_{s}", px, px) for s in ("left", "right")]
+    calib = StereoCalibration(calibration.onboard_model(pins[0]), calibration.onboard_model(pins[1]), pins[0])
+    rect = rectification(calib)
+    frame = renderer.render_pair(pair)
+    left, right = rect.apply(frame.left, frame.right)
+    return left, right, rect.rig
