@@ -130,7 +130,7 @@ def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
 
 def _log_cycle(mission: Mission, obs: Observation, cycle: PlanCycle, arcs: list[GestaltArc]) -> None:
     rec, t, step = mission.rec, mission.sim.time_s, mission.step
-    pair = obs.pair(HAZCAM)
+    pair = mission.onboard.rectified(obs, HAZCAM)
     T_world_rover = cycle.T_world_rover
     decision = cycle.decision
     rec.log_stereo_images(HAZCAM, t, step, pair.left_u8, pair.right_u8, cycle.range_image.disparity_px)

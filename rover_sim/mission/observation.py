@@ -4,8 +4,13 @@ The honesty rule (estimators never read ground truth) is enforced here by type: 
 (:mod:`rover_sim.mission.onboard`) accept exactly :class:`Observation` and refuse anything else, subclasses included,
 and an Observation holds only what flight software had on Mars:
 
-- stereo pairs as the cameras delivered them, each with the *calibrated* camera model flight software holds
-  (computed at the commanded mast pointing, not the physically pointed mast);
+- stereo pairs as the cameras delivered them, each with the *calibrated* camera models flight software holds
+  (computed at the commanded mast pointing, not the physically pointed mast). In the ideal profile the images
+  arrive rectified (pinhole cameras) and ``calibration`` is None; with ``[sensors.lens]`` on (flight profile) they
+  are **raw** (distorted through the true lenses, unrectified), ``calibration`` holds the calibrated left/right
+  CAHVOR or fisheye models (:mod:`nav.lens`) and ``rig`` is the rectified pinhole rig those models define
+  (:func:`nav.rectify.rectified_rig`); the onboard stack rectifies before stereo and VO
+  (:meth:`rover_sim.mission.onboard.Onboard.rectified`);
 - IMU and wheel/steering encoder samples since the previous observation;
 - the commanded mast pointing;
 - the operator-given start pose of the drive (from the previous localisation and sun finding);
@@ -27,19 +32,24 @@ if TYPE_CHECKING:
     from collections.abc import Mapping
 
     from nav.camera import StereoRig
+    from nav.rectify import StereoCalibration
     from nav.trajectory import Pose
     from nav.types import EncoderSample, ImuSample
 
 
 @dataclass(frozen=True)
 class StereoImages:
-    """One stereo pair: rectified greyscale images (uint8, H x W) and the onboard (calibrated) camera model."""
+    """One stereo pair: greyscale images (uint8, H x W) and the onboard (calibrated) camera models.
+
+    ``calibration`` None: the images are rectified for ``rig``. Otherwise they are raw, and ``rig`` is the rectified
+    rig of ``calibration`` (what stereo and VO see after :meth:`~rover_sim.mission.onboard.Onboard.rectified`)."""
 
     camera: str  # "navcam", "hazcam_front" or "hazcam_rear"
     t_s: float
     left_u8: np.ndarray
     right_u8: np.ndarray
     rig: StereoRig
+    calibration: StereoCalibration | None = None  # the calibrated raw models (flight profile)
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,8 @@ honesty rule is a type, not a convention. Nothing here imports the simulator, th
 
 - :meth:`Onboard.observe`: each encoder reading with the IMU samples up to it -> two dead reckoners (one pure
   wheel/IMU for comparison, one that VO corrects: the pose the rover drives on), at the encoders' 8 Hz.
+- :meth:`Onboard.rectified`: a raw pair (flight profile) -> the rectified pair, through the calibrated camera
+  models carried by the observation (MER rectified before stereo and VO); every use of a pair goes through it.
 - :meth:`Onboard.vo_step`: one stereo pair -> VO (seed 000 section 2) -> an accepted motion replaces the
   dead-reckoned increment since the previous pair (MER practice); a refusal leaves dead reckoning standing.
   ``vo_update = "position"`` (MER's default, Ali et al. 2005) replaces the position only and keeps the IMU's
@@ -28,13 +30,14 @@ from nav.camera import StereoRig, transform_points
 from nav.dead_reckoning import DeadReckoner
 from nav.geometry import se3_inv
 from nav.protocols import Planner, StereoMatcher, VisualOdometer
+from nav.rectify import rectification
 from nav.stereo import RangeImage, range_image_with
 from nav.trajectory import Pose
 from nav.types import ImuSample, RoverGeometry
 from nav.vo.params import VoParams
 from nav.vo.shadow import RoverShape, predict_shadow, vo_feature_mask
 from nav.vo.texture import points_in_view, trackable_points, view_overlap
-from rover_sim.mission.observation import Observation, require_observation
+from rover_sim.mission.observation import Observation, StereoImages, require_observation
 
 # Hazcam look-ahead on MER: 3-4 m useful. At 256^2 (10 cm baseline) the disparity at 3.5 m is ~2 px and
 # elevation errors there reach 10-20 cm, as big as the steps GESTALT must see; farther points only add false rocks.
@@ -121,6 +124,7 @@ class Onboard:
         self._last_frame_distance_m = 0.0
         self._vo_takes_mask = vo is not None and accepts_feature_mask(vo)
         self._last_pair: tuple | None = None  # (left, right, rig, mask) of the previous VO pair
+        self._rectified: dict[str, tuple[np.ndarray, StereoImages]] = {}  # camera -> (raw left, rectified pair)
 
     @property
     def pose(self) -> Pose:
@@ -138,13 +142,33 @@ class Onboard:
             self.estimator.update(upto, enc)
         return self.estimator.pose
 
+    # ------------------------------------------------------------------ rectification
+    def rectified(self, obs: Observation, camera: str) -> StereoImages:
+        """``camera``'s pair of ``obs``, rectified with its calibrated models (unchanged if already rectified).
+
+        Stereo and VO then triangulate with the rectified pinhole rig, which is triangulating through the models:
+        each rectified pixel carries the ray its raw pixel has under the calibrated CAHVOR/fisheye model
+        (:mod:`nav.rectify`), so calibration errors reach the estimates as they did on MER. The tables are cached
+        per calibration and the last rectified pair per camera is reused."""
+        pair = require_observation(obs, "Onboard.rectified").pair(camera)
+        if pair.calibration is None:
+            return pair
+        hit = self._rectified.get(camera)
+        if hit is not None and hit[0] is pair.left_u8:
+            return hit[1]
+        rect = rectification(pair.calibration)
+        left, right = rect.apply(pair.left_u8, pair.right_u8)
+        out = StereoImages(camera, pair.t_s, left, right, rect.rig)
+        self._rectified[camera] = (pair.left_u8, out)
+        return out
+
     # ------------------------------------------------------------------ visual odometry
     def vo_step(self, obs: Observation, camera: str) -> VoStep:
         """Run VO on ``obs``'s ``camera`` pair and apply an accepted motion to the onboard pose."""
         obs = require_observation(obs, "Onboard.vo_step")
         if self.vo is None:
             raise RuntimeError("VO is off in this configuration ([nav.vo] enabled = false)")
-        pair = obs.pair(camera)
+        pair = self.rectified(obs, camera)
         est = self.estimator
         pred = est.predicted_motion_rover()
         commanded = est.distance_m - self._last_frame_distance_m
@@ -188,7 +212,7 @@ class Onboard:
         """For a candidate pointing's pair: (its trackable features inside the previous pair's view, the
         predicted ground overlap with the previous pair)."""
         obs = require_observation(obs, "Onboard.candidate_texture")
-        pair = obs.pair(camera)
+        pair = self.rectified(obs, camera)
         if self._last_pair is None:
             return 0, 0.0
         prev_rig, motion = self._last_pair[2], self.estimator.predicted_motion_rover()
@@ -218,7 +242,7 @@ class Onboard:
 
     # ------------------------------------------------------------------ stereo and planning
     def range_image(self, obs: Observation, camera: str) -> RangeImage:
-        pair = require_observation(obs, "Onboard.range_image").pair(camera)
+        pair = self.rectified(require_observation(obs, "Onboard.range_image"), camera)
         return range_image_with(self.stereo, pair.left_u8, pair.right_u8, pair.rig)
 
     def start_planning(self) -> None:

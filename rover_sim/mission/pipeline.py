@@ -368,7 +368,7 @@ class Mission:
         )
 
     def log_frame(self, obs, camera: str, res) -> None:  # noqa: ANN001
-        pair = obs.pair(camera)
+        pair = self.onboard.rectified(obs, camera)
         t = self.sim.time_s
         self.rec.log_camera(camera, pair.rig, t)
         disparity = None

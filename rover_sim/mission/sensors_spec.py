@@ -15,6 +15,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.mission.odometry_spec import OdometryErrorSpec
 from rover_sim.render.imaging import ImagingSpec
 
@@ -22,7 +23,7 @@ Profile = Literal["flight", "ideal"]
 DEFAULT_PROFILE: Profile = "ideal"
 
 #: sub-table name -> model class (with ``profile_defaults(profile) -> dict``); filled as error families land
-SUBTABLES: dict[str, type[BaseModel]] = {"imaging": ImagingSpec, "odometry": OdometryErrorSpec}
+SUBTABLES: dict[str, type[BaseModel]] = {"lens": LensErrorSpec, "imaging": ImagingSpec, "odometry": OdometryErrorSpec}
 
 
 class SensorsSpec(BaseModel):
@@ -31,6 +32,7 @@ class SensorsSpec(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, validate_default=True)
 
     profile: Profile = Field(DEFAULT_PROFILE, description="'flight' (errors as flown) or 'ideal' (none).")
+    lens: LensErrorSpec = Field(default_factory=LensErrorSpec, description="lens models, calibration, mast encoders")
     imaging: ImagingSpec = Field(default_factory=ImagingSpec)
     odometry: OdometryErrorSpec = Field(default_factory=OdometryErrorSpec)
 

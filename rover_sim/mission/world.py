@@ -18,7 +18,9 @@ import numpy as np
 
 from nav.camera import StereoRig
 from nav.geometry import R_to_quat_wxyz
+from nav.rectify import StereoCalibration, rectification
 from nav.trajectory import Pose
+from rover_sim.mission.calibration import MastEncoders, RunCalibration, build_true_lens, cameras_at_pointing
 from rover_sim.mission.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
 from rover_sim.mission.observation import Observation, StereoImages
 from rover_sim.mission.scenario import Scenario
@@ -71,6 +73,10 @@ class World:
         self.sim.lock_wheels(list(scenario.faults.locked_wheels))
         st = scenario.start
         self.sim.place(st.x_m, st.y_m, math.radians(st.yaw_deg))
+        lens = scenario.sensors.lens
+        # [sensors.lens]: true mounting + calibration errors (None: ideal cameras), mast encoder errors
+        self.calibration = RunCalibration(lens, scenario.seed) if lens.enabled else None
+        self.mast_encoders = MastEncoders(lens, scenario.seed)
         self.mast_pan_deg, self.mast_elevation_deg = 0.0, 0.0
         self.point_mast(scenario.nav.mast_pan_deg, scenario.nav.mast_tilt_deg)
         self.sim.step_for(SETTLE_S)
@@ -81,17 +87,19 @@ class World:
             self.sim.law.sinkage_rolling_radius = True
         self.sensors = SensorSuite(self.sim, seed=scenario.seed, errors=self.odometry_errors)  # IMU in the loop
         noise = ImageNoise(seed=scenario.seed) if scenario.nav.image_noise else None
-        self.renderer = StereoRenderer(
-            self.sim,
-            RenderConfig(
-                resolution_px=scenario.nav.resolution_px,
-                noise=noise,
-                shadows=scenario.sun.shadows,
-                imaging=scenario.sensors.imaging,
-                imaging_seed=scenario.seed,
-            ),
+        config = RenderConfig(
+            resolution_px=scenario.nav.resolution_px,
+            noise=noise,
+            shadows=scenario.sun.shadows,
+            imaging=scenario.sensors.imaging,
+            imaging_seed=scenario.seed,
         )
+        true_lens = None
+        if self.calibration is not None:
+            true_lens = build_true_lens(self.sim.model, self.sim.data, self.calibration, config.native_px)
+        self.renderer = StereoRenderer(self.sim, config, lens=true_lens)
         self._rigs: dict[str, StereoRig] = {}
+        self._calibrations: dict[str, StereoCalibration | None] = {}
         self.calibrate(scenario.nav.camera)
         # the ephemeris: the sun's direction over the site (fixed over a drive of minutes)
         # (moves with the mission clock when the scenario sets local_solar_time_h)
@@ -106,12 +114,29 @@ class World:
     def point_mast(self, pan_deg: float, elevation_deg: float) -> None:
         """Command the mast (pan left positive, elevation up positive); the servos move as physics steps."""
         self.mast_pan_deg, self.mast_elevation_deg = pan_deg, elevation_deg
-        self.sim.set_mast(math.radians(pan_deg), -math.radians(elevation_deg))
+        pan_true_deg, elevation_true_deg = self.mast_encoders.true_angles_deg(pan_deg, elevation_deg)
+        self.sim.set_mast(math.radians(pan_true_deg), -math.radians(elevation_true_deg))
 
     def calibrate(self, camera: str) -> StereoRig:
         """The camera model flight software holds for ``camera``: the calibrated rig at the current (commanded)
-        pointing, fixed until :meth:`calibrate` is called again after a repointing."""
-        self._rigs[camera] = self.renderer.rig(camera)
+        pointing, fixed until :meth:`calibrate` is called again after a repointing.
+
+        With ``[sensors.lens]`` errors: the rig is the *rectified* rig of the calibrated (erroneous) models at the
+        commanded mast angles (:mod:`rover_sim.mission.calibration`, :mod:`nav.rectify`), and the models travel
+        with each pair for the onboard rectification."""
+        spec = self.scenario.sensors.lens
+        if self.calibration is None and not spec.has_mast_error:  # ideal: the exact rig at the current state
+            self._rigs[camera], self._calibrations[camera] = self.renderer.rig(camera), None
+            return self._rigs[camera]
+        names = [f"{camera}_left", f"{camera}_right"]
+        px = self.renderer.config.resolution_px
+        pins = cameras_at_pointing(self.sim.model, self.sim.data, names, px, self.mast_pan_deg, self.mast_elevation_deg)
+        if self.calibration is None:
+            self._rigs[camera], self._calibrations[camera] = StereoRig(pins[0], pins[1]), None
+        else:
+            calib = StereoCalibration(self.calibration.onboard_model(pins[0]), self.calibration.onboard_model(pins[1]),
+                                      target=pins[0])  # fmt: skip
+            self._rigs[camera], self._calibrations[camera] = rectification(calib).rig, calib
         return self._rigs[camera]
 
     def onboard_rig(self, camera: str) -> StereoRig:
@@ -173,7 +198,10 @@ class World:
 
     def observation_with(self, imu: list, encoders: list, frames: dict[str, StereoFrame]) -> Observation:
         """An Observation of given sensor samples and rendered frames; each pair carries the *onboard* rig."""
-        images = {c: StereoImages(c, f.t_s, f.left, f.right, self.onboard_rig(c)) for c, f in frames.items()}
+        images = {
+            c: StereoImages(c, f.t_s, f.left, f.right, self.onboard_rig(c), self._calibrations.get(c))
+            for c, f in frames.items()
+        }
         return Observation(
             t_s=self.sim.time_s,
             imu=tuple(imu),

@@ -30,6 +30,10 @@ Pixel values: luminance ``Y = 0.299 R + 0.587 G + 0.114 B`` of the rendered RGB;
 read noise is added in 12-bit counts, the signal is quantised to 12 bits (0-4095) and then scaled to 8 bits
 (MER downlinked 12-bit images; the navigation software used 8-bit ones).
 
+Lenses (``[sensors.lens]``, flight profile): with a :class:`~rover_sim.render.lens.TrueLens` the pair is rendered as
+a wider pinhole view and remapped into the true raw (distorted) cameras before binning and noise (one call in
+:meth:`StereoRenderer._grey`); without one (ideal profile) nothing changes.
+
 GL: ``MUJOCO_GL=egl`` (set by ``rover_sim/__init__``); each :class:`mujoco.Renderer` owns one EGL context.
 Never ``fork()`` a process after a context exists (spawn workers instead).
 """
@@ -48,6 +52,7 @@ from nav.camera import PinholeCamera, StereoRig
 from rover_sim.errors import RenderingUnavailable
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
 from rover_sim.render.imaging import ImageFormation, ImagingSpec
+from rover_sim.render.lens import IdentityLens, TrueLens, pair_of
 from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles: re-exported from here
     GROUP_HIDDEN,
     GROUP_SHOWN,
@@ -288,7 +293,7 @@ def _geom_id_map(render_model: mujoco.MjModel, phys_model: mujoco.MjModel) -> np
 class RenderWorld:
     """The physics model plus render-only geometry, with its own MjData kept in step with the simulation's."""
 
-    def __init__(self, sim: RoverSim, config: RenderConfig) -> None:
+    def __init__(self, sim: RoverSim, config: RenderConfig, offscreen_px: int = 0) -> None:
         self.sim, self.config = sim, config
         spec = sim.spec.copy()
         self.tiles = add_terrain_tiles(
@@ -307,7 +312,7 @@ class RenderWorld:
         vis.quality.offsamples = config.multisamples
         vis.quality.numslices, vis.quality.numstacks = config.builtin_slices, config.builtin_stacks
         vis.map.shadowclip = config.shadow_half_extent_m / spec.stat.extent
-        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024)  # render_rgb up to 1024
+        vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024, offscreen_px)  # + lens
         self.model = spec.compile()
         self.data = mujoco.MjData(self.model)
         if self.model.nq != sim.model.nq or self.model.nbody != sim.model.nbody:
@@ -422,11 +427,12 @@ class StereoRenderer:
     model, so :meth:`rig` equals :func:`rover_sim.render.cameras.stereo_rig` at the output resolution.
     """
 
-    def __init__(self, sim: RoverSim, config: RenderConfig | None = None) -> None:
+    def __init__(self, sim: RoverSim, config: RenderConfig | None = None, lens: TrueLens | None = None) -> None:
         check_gl()
         self.config = config or RenderConfig()
         self.sim = sim
-        self.world = RenderWorld(sim, self.config)
+        self.lens = lens or IdentityLens()  # the true lenses (flight profile): raw images from a wider pinhole view
+        self.world = RenderWorld(sim, self.config, self.lens.max_render_px)
         self.shadows = self.config.shadows and sim.sun.shadows  # switch per render: ``renderer.shadows = False``
         self._renderers: dict[int, mujoco.Renderer] = {}
         self._rng = np.random.default_rng(self.config.noise.seed) if self.config.noise else None
@@ -512,21 +518,25 @@ class StereoRenderer:
         mujoco.mjv_updateCamera(self.world.model, self.world.data, self._right_cam, r.scene)
 
     def _grey(self, rgb: np.ndarray, cam_name: str) -> np.ndarray:
-        luma = rgb.astype(np.float32) @ LUMA_WEIGHTS
+        luma = self.lens.to_raw(rgb.astype(np.float32) @ LUMA_WEIGHTS, cam_name)  # raw geometry (lens.py)
         if self.imaging is not None:  # flight: exposure, photons, noise, ADC, binning, companding (imaging.py)
             return self.imaging.form(luma, cam_name)
         return quantise(bin_average(luma, self.config.binning), self.config.noise, self._rng)
 
     # -- public renders
     def render_pair(self, pair: str = "navcam") -> StereoFrame:
-        """Greyscale stereo pair (uint8, ``resolution_px`` square) of ``pair`` at the simulation's current state."""
+        """Greyscale stereo pair (uint8, ``resolution_px`` square) of ``pair`` at the simulation's current state.
+
+        With a :class:`~rover_sim.render.lens.TrueLens` the images are raw (distorted, unrectified) and ``rig`` is
+        still the MJCF pinhole rig (the render geometry, not a model of the raw images)."""
         if pair not in STEREO_PAIRS:
             raise ValueError(f"unknown stereo pair {pair!r}; choose one of {STEREO_PAIRS}")
         names = [f"{pair}_left", f"{pair}_right"]
-        r = self._scene_for(names, self.config.native_px)
-        left = self._grey(r.render(), names[0])
-        self._switch_camera(r, names[1])
-        right = self._grey(r.render(), names[1])
+        with self.lens.view(self.world.model, pair, self.config.native_px) as px:
+            r = self._scene_for(names, px)
+            left = self._grey(r.render(), names[0])
+            self._switch_camera(r, names[1])
+            right = self._grey(r.render(), names[1])
         return StereoFrame(self.sim.time_s, self.rig(pair), left, right, dict(self.last_drawn))
 
     def render_rgb(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
@@ -536,7 +546,8 @@ class StereoRenderer:
 
     def render_grey(self, cam_name: str) -> np.ndarray:
         """Greyscale image of one camera, processed like :meth:`render_pair` (binning, noise)."""
-        return self._grey(self._scene_for([cam_name], self.config.native_px).render(), cam_name)
+        with self.lens.view(self.world.model, pair_of(cam_name), self.config.native_px) as px:
+            return self._grey(self._scene_for([cam_name], px).render(), cam_name)
 
     def render_depth(self, cam_name: str, resolution_px: int | None = None) -> np.ndarray:
         """(H, W) float32 z-depth in metres along the optical axis (OpenCV z) at pixel centres; inf = sky.

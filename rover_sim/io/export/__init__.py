@@ -186,9 +186,9 @@ class DatasetSink:
             self.vo.push(pose.t_s, pose)
 
     def on_images(self, obs: Observation, truth: Pose) -> None:
-        pair = obs.images.get(self.camera)
-        if pair is None or self.mission is None:
+        if self.camera not in obs.images or self.mission is None:
             return
+        pair = self.mission.onboard.rectified(obs, self.camera)  # flight profile: raw pairs exported rectified
         true_rig = self.mission.world.renderer.rig(self.camera)  # the mast as it physically stands
         frame = Frame(pair.t_s, self.camera, pair.left_u8, pair.right_u8, pair.rig, true_rig.left.T_rover_cam, truth)
         self.frames.push(pair.t_s, frame)
