@@ -107,7 +107,7 @@ def bench_stereo_cmd(
         list[str] | None, typer.Option("--stereo", help=f"Also run this stereo matcher ({_IMPL}); repeatable.")
     ] = None,
     junit: JunitOpt = None,
-    profile: Annotated[str, typer.Option("--profile", help="Sensor profile of the pairs: ideal | flight.")] = "ideal",
+    profile: Annotated[str, typer.Option("--profile", help="Pairs: flight (and ideal beside it) | ideal.")] = "flight",
 ) -> None:
     """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px) at
     256x256 and 1024x1024; any --stereo plugin on the same 256 px pairs."""

@@ -83,7 +83,7 @@ class AppearanceSpec(_Spec):
     texture_px_per_m: float = Field(100.0, ge=10.0, le=200.0, description="Texels per metre (capped by GL size).")
     texture_patches: list[TexturePatch] = Field(default_factory=list, max_length=200)
     regolith: Literal["classic", "multiscale"] = Field(
-        "classic",
+        "multiscale",
         description="Soil texture: 'classic' FFT speckle or 'multiscale' (fine soil, pebbles, clasts, "
         "relief shaded by the sun; terrains.regolith).",
     )

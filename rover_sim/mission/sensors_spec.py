@@ -20,7 +20,7 @@ from rover_sim.mission.odometry_spec import OdometryErrorSpec
 from rover_sim.render.imaging import ImagingSpec
 
 Profile = Literal["flight", "ideal"]
-DEFAULT_PROFILE: Profile = "ideal"
+DEFAULT_PROFILE: Profile = "flight"
 
 #: sub-table name -> model class (with ``profile_defaults(profile) -> dict``); filled as error families land
 SUBTABLES: dict[str, type[BaseModel]] = {"lens": LensErrorSpec, "imaging": ImagingSpec, "odometry": OdometryErrorSpec}
