@@ -297,6 +297,8 @@ class Scenario(_Spec):
         for key, default in SOIL_MODEL_DEFAULTS.items():
             if d["physics"].get(key) == default:
                 del d["physics"][key]
+        if d["terrain"].get("streamed", 0) is None:  # opt-in streaming: whole-site scenario.json files unchanged
+            del d["terrain"]["streamed"]
         return d
 
 

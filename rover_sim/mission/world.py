@@ -12,7 +12,10 @@ Mast convention (one everywhere): ``pan_deg`` left positive, ``elevation_deg`` u
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from types import MappingProxyType
+
+import numpy as np
 
 from nav.camera import StereoRig
 from nav.trajectory import Pose
@@ -22,10 +25,17 @@ from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoFrame, Ste
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.sensors import SensorSuite
 from rover_sim.sim.world import Sun
-from terrains import Terrain, synthesize
+from rover_sim.sim.stream import TerrainStreamer
+from terrains import Terrain, synthesize, texture_rgb_u8
+from terrains.stream import window_albedo
 
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB
 SETTLE_S = 1.0  # the rover settles on the terrain before the run starts
+
+
+def _window_painter(px_per_m: float, seed: int, contrast: float) -> Callable[[Terrain], np.ndarray]:
+    """Texture of a streamed window from world-coordinate albedo (``terrains.stream.albedo_world``)."""
+    return lambda window: texture_rgb_u8(window_albedo(window, px_per_m, seed, contrast))
 
 
 def texture_px_per_m(terrain: Terrain, wanted_px_per_m: float) -> float:
@@ -38,22 +48,30 @@ class World:
 
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
-        self.terrain = synthesize(scenario.terrain, scenario.seed)
         ap = scenario.appearance
-        texture = terrain_texture(
-            self.terrain,
-            texture_px_per_m(self.terrain, ap.texture_px_per_m),
-            scenario.seed,
-            fine_soil=ap.fine_soil,
-            contrast=ap.contrast,
-            patches=ap.patch_tuples(),
-        )
+        streamer, texture, texture_fn = None, None, None
+        if scenario.terrain.streamed is not None:  # large sites: a window of tiles follows the rover
+            streamer = TerrainStreamer(scenario.terrain, scenario.seed)
+            terrain = streamer.initial_window(scenario.start.x_m, scenario.start.y_m)
+            texture_fn = _window_painter(texture_px_per_m(terrain, ap.texture_px_per_m), scenario.seed, ap.contrast)
+        else:
+            terrain = synthesize(scenario.terrain, scenario.seed)
+            texture = terrain_texture(
+                terrain,
+                texture_px_per_m(terrain, ap.texture_px_per_m),
+                scenario.seed,
+                fine_soil=ap.fine_soil,
+                contrast=ap.contrast,
+                patches=ap.patch_tuples(),
+            )
         self.sim = RoverSim(
-            self.terrain,
+            terrain,
             Sun(scenario.sun.azimuth_deg, scenario.sun.elevation_deg, scenario.sun.shadows),
             texture_rgb=texture,
             timestep_s=scenario.physics.timestep_s,
             soil_model=scenario.physics.soil_model,
+            streamer=streamer,
+            texture_fn=texture_fn,
         )
         if scenario.physics.deformable:  # experimental, wong_reece only: ruts, berms, multipass (sim/deform.py)
             self.sim.enable_deformation()
@@ -74,6 +92,11 @@ class World:
         self.sun_direction_world = Sun(scenario.sun.azimuth_deg, scenario.sun.elevation_deg).direction()
         # the operator-given start of the drive (previous localisation and sun finding), fixed once settled
         self.operator_start_pose = Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz())
+
+    @property
+    def terrain(self) -> Terrain:
+        """The terrain under the rover (for a streamed site: the current window)."""
+        return self.sim.terrain
 
     # ------------------------------------------------------------------ commands to the hardware
     def point_mast(self, pan_deg: float, elevation_deg: float) -> None:
