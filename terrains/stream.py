@@ -322,6 +322,19 @@ class StreamedSite:
                               buried, name=f"rock_t{tx}_{ty}_{len(rocks):03d}"))  # type: ignore[arg-type]  # fmt: skip
         return rocks
 
+    def closed_tile(self, tx: int, ty: int) -> WindowTerrain:
+        """Tile ``(tx, ty)`` with one more row and column of relief (its east and north edges), as a
+        :class:`WindowTerrain`: neighbouring closed tiles share their edges (for meshes of single tiles)."""
+        t, n, c = self.tile(tx, ty), self.tile_cells, self.cell_size_m
+        xs, ys = (tx * n + np.arange(n + 1)) * c, (ty * n + np.arange(n + 1)) * c
+        h = np.empty((n + 1, n + 1))
+        h[:n, :n] = t.heights_m
+        h[n, :] = self.relief_m(xs, np.full(n + 1, ys[-1]))
+        h[:n, n] = self.relief_m(np.full(n, xs[-1]), ys[:n])
+        mats = np.full(h.shape, int(self.material), dtype=np.uint8)
+        return WindowTerrain(h, c, mats, list(t.rocks), self.seed, self.recipe, 0.5 * (xs[0] + xs[-1]),
+                             0.5 * (ys[0] + ys[-1]), (tx, ty))  # fmt: skip
+
     # -- windows
     def window(self, centre: tuple[int, int]) -> WindowTerrain:
         """The ``window_tiles`` x ``window_tiles`` tiles around ``centre`` as one :class:`WindowTerrain`."""

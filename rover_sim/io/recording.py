@@ -56,6 +56,7 @@ from rover_sim.io.recording_helpers import (  # noqa: F401 - TERRAIN_MAX_TRIANGL
     terrain_mesh_step,
     xyzw,
 )
+TILE_MESH_SIDE_PTS = 33  # a streamed tile's mesh in the recording: 25 cm spacing for an 8 m tile
 from rover_sim.io.rrd import entity_row_counts  # noqa: F401 - re-exported from here
 
 if TYPE_CHECKING:
@@ -94,6 +95,8 @@ class Recorder(Protocol):
     def wants_images(self) -> bool: ...
 
     def log_terrain(self, terrain: Terrain) -> None: ...
+
+    def log_terrain_tile(self, key: str, terrain: Terrain) -> None: ...
 
     def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None: ...
 
@@ -160,6 +163,9 @@ class NullRecorder:
         return False
 
     def log_terrain(self, terrain: Terrain) -> None:
+        pass
+
+    def log_terrain_tile(self, key: str, terrain: Terrain) -> None:
         pass
 
     def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None:
@@ -335,6 +341,36 @@ class RerunRecorder:
                 rr.Mesh3D(
                     vertex_positions=v,
                     triangle_indices=np.concatenate(faces).astype(np.uint32),
+                    albedo_factor=_ROCK_RGBA,
+                ),
+                static=True,
+            )
+
+    def log_terrain_tile(self, key: str, terrain: Terrain) -> None:
+        """One tile of a streamed site, logged once when it first appears (static, coarse: about
+        ``TILE_MESH_SIDE_PTS`` points a side, so the recording grows linearly and slowly with distance)."""
+        if self._terrain is None:
+            self._terrain = terrain  # keep-out circles drape on the first tile's window
+        step = max(1, math.ceil((max(terrain.nrow, terrain.ncol) - 1) / (TILE_MESH_SIDE_PTS - 1)))
+        mesh = terrain.to_mesh(step=step, colour_by_material=True)
+        self._log(
+            f"world/terrain/tiles/{key}",
+            rr.Mesh3D(
+                vertex_positions=np.asarray(mesh.vertices, dtype=np.float32),
+                triangle_indices=np.asarray(mesh.faces, dtype=np.uint32),
+                vertex_colors=np.asarray(mesh.visual.vertex_colors, dtype=np.uint8),
+            ),
+            static=True,
+        )
+        if terrain.rocks:
+            meshes = [rock.mesh() for rock in terrain.rocks]
+            offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+            self._log(
+                f"world/terrain/tiles/{key}/rocks",
+                rr.Mesh3D(
+                    vertex_positions=np.concatenate([m.vertices for m in meshes]).astype(np.float32),
+                    triangle_indices=np.concatenate([m.faces + o for m, o in zip(meshes, offsets, strict=True)])
+                    .astype(np.uint32),
                     albedo_factor=_ROCK_RGBA,
                 ),
                 static=True,

@@ -95,6 +95,7 @@ def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
         decision = cycle.decision
         stats.cycle_ms.append(cycle.ms)
         stats.cycles += 1
+        mission.charge_autonav_cycle()
         stats.last_decision = decision
         _log_cycle(mission, obs, cycle, onboard.planner.arcs)  # type: ignore[union-attr]
         if decision.arc is None:

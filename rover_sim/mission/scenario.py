@@ -239,6 +239,21 @@ class PassSpec(_Spec):
     )
 
 
+class SolSpec(_Spec):
+    """``[sol]``: the day's drive as MER flew it (issue #18): the commands run until the drive-time budget (mission
+    clock: driving + imaging + computing, ``rover_sim/mission/clock.py``) or the odometry distance budget is spent.
+    Long drives keep fewer poses (``pose_stride``) so memory and the recording grow slowly with distance."""
+
+    max_time_s: float = Field(gt=0.0, le=86400.0, description="Drive-time budget on the mission clock, s.")
+    max_distance_m: float | None = Field(None, gt=0.0, le=5000.0, description="Odometry distance budget, m.")
+    start_local_solar_time_h: float = Field(11.0, ge=0.0, lt=24.0, description="Local solar time at the start.")
+    pose_stride: int = Field(1, ge=1, le=64, description="Ticks (8 Hz) between kept poses and logged poses.")
+    vo_min_slope_deg: float | None = Field(
+        None, ge=0.0, le=45.0, description="Blind drives image VO only where the onboard tilt exceeds this (MER)."
+    )
+    benchmark_only: bool = Field(False, description="A bench traverse case, not part of the scenario catalogue.")
+
+
 SOIL_MODEL_DEFAULTS = {"soil_model": "bekker", "deformable": False}
 
 
@@ -276,6 +291,7 @@ class Scenario(_Spec):
     physics: PhysicsSpec = Field(default_factory=PhysicsSpec)
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
     fast: bool = Field(False, description="Part of the fast CI suite.")
+    sol: SolSpec | None = Field(None, description="Drive-time and distance budgets of a sol's drive (issue #18).")
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)
 
@@ -299,6 +315,8 @@ class Scenario(_Spec):
                 del d["physics"][key]
         if d["terrain"].get("streamed", 0) is None:  # opt-in streaming: whole-site scenario.json files unchanged
             del d["terrain"]["streamed"]
+        if d.get("sol", 0) is None:
+            del d["sol"]
         return d
 
 

@@ -37,6 +37,7 @@ class TerrainStreamer:
         self.rocks_dropped = 0  # rocks beyond the slot pool in some window (the smallest are left out)
         self.clipped_windows = 0  # windows whose relief exceeded the encoding range
         self.elevation_range_m = MIN_ELEVATION_RANGE_M
+        self._logged: set[tuple[int, int]] = set()  # tiles handed to the recording already
 
     def initial_window(self, x_m: float, y_m: float) -> WindowTerrain:
         w = self._fit(self.site.window(self.site.tile_of(x_m, y_m)))
@@ -55,6 +56,19 @@ class TerrainStreamer:
         if tile == current.window_index:
             return None
         return self._fit(self.site.window(tile))
+
+    def new_tiles(self, window: WindowTerrain) -> list[tuple[str, WindowTerrain]]:
+        """Tiles of ``window`` not handed out before, each as a terrain of one tile plus its east and north
+        neighbours' first row/column (so logged tiles join): ``(key, terrain)`` for the recording."""
+        k = self.site.stream.window_tiles
+        cx, cy = window.window_index
+        out = []
+        for tx in range(cx - k // 2, cx + k // 2 + 1):
+            for ty in range(cy - k // 2, cy + k // 2 + 1):
+                if (tx, ty) not in self._logged:
+                    self._logged.add((tx, ty))
+                    out.append((f"t{tx}_{ty}", self.site.closed_tile(tx, ty)))
+        return out
 
     def apply(self, model: mujoco.MjModel, window: WindowTerrain) -> None:
         """Write ``window`` into ``model``: hfield data and position, rock slots (same layout as compiled).
