@@ -231,6 +231,7 @@ class StreamedSite:
         self.tile_m = self.tile_cells * self.cell_size_m
         self._cache: OrderedDict[tuple[int, int], TerrainTile] = OrderedDict()
         self._cache_tiles = cache_tiles
+        self._albedo: OrderedDict[tuple, np.ndarray] = OrderedDict()
         self.tiles_built = 0
         self._explicit = [_Crater(c.center_xy_m[0], c.center_xy_m[1], c) for c in recipe.craters]
         self.material = {"bedrock": Material.BEDROCK, "mixed": Material.MIXED}.get(recipe.material.kind,
@@ -334,6 +335,30 @@ class StreamedSite:
         mats = np.full(h.shape, int(self.material), dtype=np.uint8)
         return WindowTerrain(h, c, mats, list(t.rocks), self.seed, self.recipe, 0.5 * (xs[0] + xs[-1]),
                              0.5 * (ys[0] + ys[-1]), (tx, ty))  # fmt: skip
+
+    # -- albedo
+    def albedo_tile(self, tx: int, ty: int, texels_per_cell: int, contrast: float = 1.0) -> np.ndarray:
+        """Albedo texels of tile ``(tx, ty)``: ``texels_per_cell`` per grid cell a side, texel centres on a world
+        lattice (cell ``g`` holds texels at ``(g + (i + 0.5) / texels_per_cell) * cell``), cached like tiles."""
+        key = ("albedo", tx, ty, texels_per_cell, contrast)
+        if key not in self._albedo:
+            m = self.tile_cells * texels_per_cell
+            step = self.cell_size_m / texels_per_cell
+            xs, ys = (tx * m + np.arange(m) + 0.5) * step, (ty * m + np.arange(m) + 0.5) * step
+            self._albedo[key] = albedo_world(xs[None, :], ys[:, None], self.seed, contrast)
+            while len(self._albedo) > self._cache_tiles:
+                self._albedo.popitem(last=False)
+        self._albedo.move_to_end(key)
+        return self._albedo[key]
+
+    def window_albedo(self, window: WindowTerrain, px_per_m: float, contrast: float = 1.0) -> np.ndarray:
+        """A window's texture (row 0 south, column 0 west) from cached tile texels: it spans exactly the window's
+        grid (the last tile's last cell is left out), so every window agrees texel for texel with its neighbours."""
+        ppc = max(1, round(px_per_m * self.cell_size_m))
+        k = self.stream.window_tiles
+        tx0, ty0 = window.window_index[0] - k // 2, window.window_index[1] - k // 2
+        rows = [np.hstack([self.albedo_tile(tx0 + a, ty0 + b, ppc, contrast) for a in range(k)]) for b in range(k)]
+        return np.vstack(rows)[:-ppc, :-ppc]
 
     # -- windows
     def window(self, centre: tuple[int, int]) -> WindowTerrain:

@@ -27,15 +27,14 @@ from rover_sim.sim.sensors import SensorSuite
 from rover_sim.sim.world import Sun
 from rover_sim.sim.stream import TerrainStreamer
 from terrains import Terrain, synthesize, texture_rgb_u8
-from terrains.stream import window_albedo
 
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB
 SETTLE_S = 1.0  # the rover settles on the terrain before the run starts
 
 
-def _window_painter(px_per_m: float, seed: int, contrast: float) -> Callable[[Terrain], np.ndarray]:
-    """Texture of a streamed window from world-coordinate albedo (``terrains.stream.albedo_world``)."""
-    return lambda window: texture_rgb_u8(window_albedo(window, px_per_m, seed, contrast))
+def _window_painter(streamer: TerrainStreamer, px_per_m: float, contrast: float) -> Callable[[Terrain], np.ndarray]:
+    """Texture of a streamed window from world-coordinate albedo, per tile (``StreamedSite.window_albedo``)."""
+    return lambda window: texture_rgb_u8(streamer.site.window_albedo(window, px_per_m, contrast))
 
 
 def texture_px_per_m(terrain: Terrain, wanted_px_per_m: float) -> float:
@@ -53,7 +52,7 @@ class World:
         if scenario.terrain.streamed is not None:  # large sites: a window of tiles follows the rover
             streamer = TerrainStreamer(scenario.terrain, scenario.seed)
             terrain = streamer.initial_window(scenario.start.x_m, scenario.start.y_m)
-            texture_fn = _window_painter(texture_px_per_m(terrain, ap.texture_px_per_m), scenario.seed, ap.contrast)
+            texture_fn = _window_painter(streamer, texture_px_per_m(terrain, ap.texture_px_per_m), ap.contrast)
         else:
             terrain = synthesize(scenario.terrain, scenario.seed)
             texture = terrain_texture(

@@ -45,9 +45,11 @@ class TerrainStreamer:
         return w
 
     def _fit(self, w: WindowTerrain) -> WindowTerrain:
-        if len(w.rocks) > self.rock_slots:
-            self.rocks_dropped += len(w.rocks) - self.rock_slots
-            w.rocks = sorted(w.rocks, key=lambda r: -r.height_m)[: self.rock_slots]
+        """Keep at most ``rock_slots - 2`` rocks (the tallest): two slots anchor the world bound (sim/world.py)."""
+        room = self.rock_slots - 2
+        if len(w.rocks) > room:
+            self.rocks_dropped += len(w.rocks) - room
+            w.rocks = sorted(w.rocks, key=lambda r: -r.height_m)[:room]
         return w
 
     def window_for(self, current: WindowTerrain, x_m: float, y_m: float) -> WindowTerrain | None:

@@ -114,6 +114,7 @@ def build_spec(
 
 PARKED_DEPTH_M = 200.0  # an unused rock slot waits this far below the hfield's base, out of every contact
 PARKED_SIZE_M = 0.01
+SITE_HALF_EXTENT_M = 20_000.0  # a streamed site stays within this of the origin (world body bound, see below)
 
 
 def rock_slot_geometry(rock: Rock | None, park_xyz_m: tuple[float, float, float]) -> tuple[list, list, list]:
@@ -132,11 +133,20 @@ def park_point_m(terrain: Terrain) -> tuple[float, float, float]:
 
 
 def _add_rock_slots(spec: mujoco.MjSpec, terrain: Terrain, slots: int) -> None:
-    """``slots`` ellipsoid rock geoms (streamed terrains): the terrain's rocks first, the rest parked."""
+    """``slots`` ellipsoid rock geoms (streamed terrains): the terrain's rocks first, the rest parked.
+
+    MuJoCo bounds the world body's static geoms once, at compile time (its bounding-volume tree), so geoms moved
+    later would fall outside it and lose their contacts: the last two slots are compiled at opposite corners
+    ``SITE_HALF_EXTENT_M`` away, so the world body's bound covers the whole site, and the midphase (the tree's
+    inner nodes, stale after a move) is switched off; contact pairs are still culled by bounding spheres.
+    """
     park = park_point_m(terrain)
+    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_MIDPHASE)
+    corners = {slots - 1: (SITE_HALF_EXTENT_M, SITE_HALF_EXTENT_M, SITE_HALF_EXTENT_M),
+               slots - 2: (-SITE_HALF_EXTENT_M, -SITE_HALF_EXTENT_M, -SITE_HALF_EXTENT_M)}  # fmt: skip
     for i in range(slots):
         rock = terrain.rocks[i] if i < len(terrain.rocks) else None
-        pos, quat, size = rock_slot_geometry(rock, park)
+        pos, quat, size = rock_slot_geometry(rock, corners.get(i, park) if rock is None else park)
         g = spec.worldbody.add_geom()
         g.name = f"{ROCK_GEOM_PREFIX}{i:04d}"
         g.type = mujoco.mjtGeom.mjGEOM_ELLIPSOID

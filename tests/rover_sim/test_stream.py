@@ -22,7 +22,7 @@ def _recipe(cover: float = 0.0) -> TerrainRecipe:
         slope=SlopeSpec(slope_deg=3.0, azimuth_deg=30.0),
         roughness=RoughnessSpec(rms_m=0.01, correlation_length_m=1.0),
         rocks=RockSpec(cover_fraction=cover, min_height_m=0.05, max_height_m=0.3, exclusion_zones=[]),
-        streamed=StreamSpec(tile_m=TILE_M, window_tiles=3, rock_slots=128, hill_amplitude_m=0.5,
+        streamed=StreamSpec(tile_m=TILE_M, window_tiles=3, rock_slots=16, hill_amplitude_m=0.5,
                             crater_density_per_km2=30.0),  # fmt: skip
     )
 
@@ -53,12 +53,19 @@ def test_windows_agree_on_shared_ground_and_albedo() -> None:
     np.testing.assert_array_equal(albedo_world(x, y, 3), albedo_world(x.copy(), y.copy(), 3))
 
 
-def _drive(streamed: bool, seconds: float = 40.0) -> tuple[np.ndarray, np.ndarray, int]:
-    """Drive +x from just before the tile edge at x = 3.975 m; returns (positions, wheel loads, recentres)."""
-    st = TerrainStreamer(_recipe(), seed=5)
-    window = st.initial_window(3.0, 1.5)
+def _drive(streamed: bool, seconds: float = 95.0) -> tuple[np.ndarray, np.ndarray, int]:
+    """Drive +x from x = 0.5 m over 2 m tiles (a 6 m window): the rover leaves the window the model was compiled
+    with, so contacts must follow the moved heightfield. The reference drives the same ground as one static 10 m
+    window. Returns (positions, wheel loads, re-centres)."""
+    recipe = _recipe()
+    recipe = recipe.model_copy(update={"streamed": recipe.streamed.model_copy(update={"tile_m": 2.0})})
+    st = TerrainStreamer(recipe, seed=5)
+    window = st.initial_window(0.5, 0.0)
+    if not streamed:
+        wide = recipe.model_copy(update={"streamed": recipe.streamed.model_copy(update={"window_tiles": 5})})
+        window = StreamedSite(wide, seed=5).window((1, 0))
     sim = RoverSim(window, streamer=st if streamed else None)
-    sim.place(3.0, 1.5, 0.0, settle_s=1.0)
+    sim.place(0.5, 0.0, 0.0, settle_s=1.0)
     rate = np.full(6, 0.04 / 0.125)
     pos, loads = [], []
     for _ in range(int(seconds * 8)):
@@ -68,14 +75,13 @@ def _drive(streamed: bool, seconds: float = 40.0) -> tuple[np.ndarray, np.ndarra
     return np.array(pos), np.array(loads), st.recentres
 
 
-def test_drive_across_a_window_recentre_is_seamless() -> None:
+def test_drive_across_window_recentres_is_seamless() -> None:
     pos_s, load_s, recentres = _drive(streamed=True)
     pos_r, load_r, _ = _drive(streamed=False)  # the same ground, never re-centred
-    assert recentres == 1 and pos_s[-1, 0] > TILE_M + 0.2
+    assert recentres >= 2 and pos_s[-1, 0] > 3.5  # beyond the window the model was compiled with
     assert np.abs(pos_s - pos_r).max() < 1e-3  # no jump in pose
     assert np.abs(load_s - load_r).max() < 0.02 * load_r.mean()  # no spike in wheel load
-    dz = np.abs(np.diff(pos_s[:, 2]))
-    assert dz.max() < 1e-3
+    assert np.abs(np.diff(pos_s[:, 2])).max() < 1e-3
 
 
 def test_streamed_deformation_is_refused() -> None:
@@ -83,3 +89,12 @@ def test_streamed_deformation_is_refused() -> None:
     sim = RoverSim(st.initial_window(0.0, 0.0), streamer=st, soil_model="wong_reece")
     with pytest.raises(ValueError, match="streamed"):
         sim.enable_deformation()
+
+
+def test_window_textures_agree_texel_for_texel() -> None:
+    site = StreamedSite(_recipe(), seed=3)
+    a, b = site.window((0, 0)), site.window((1, 0))
+    ta, tb = site.window_albedo(a, 40.0), site.window_albedo(b, 40.0)
+    assert ta.shape == (round(2 * a.half_y_m * 40), round(2 * a.half_x_m * 40))
+    shift = site.tile_cells * 2  # one tile of texels at 2 texels per 5 cm cell
+    np.testing.assert_array_equal(ta[:, shift:], tb[:, : ta.shape[1] - shift])
