@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from rover_sim.bench import write_json
+from rover_sim.errors import ConfigError
 from rover_sim.resources import data_dir, scenarios_dir
 
 BENCH_DIR = data_dir("benchmarks")
@@ -157,7 +158,7 @@ def bench_traverse(
     names = cases or list(CASES)
     unknown = [n for n in names if n not in CASES]
     if unknown:
-        raise ValueError(f"unknown traverse case(s) {unknown}; choose from {list(CASES)}")
+        raise ConfigError("--case", ", ".join(unknown), f"unknown traverse case; choose from {', '.join(CASES)}")
     rows = []
     print("| case | distance m | wall s | real-time x | peak RSS MB | RSS@100 m MB | RSS end MB | recording MB | "
           "DR % | DR 10 m seg % | VO % | goal m (truth / onboard) | passed |")  # fmt: skip
@@ -175,4 +176,4 @@ def bench_traverse(
     write_json(json_path, result)
     if json_path:
         write_json(str(Path(json_path).with_suffix(".details.json")), {"cases": rows})
-    return result
+    return result | {"details": rows}

@@ -158,15 +158,16 @@ def bench_traverse_cmd(
         "runs/bench_traverse"
     ),
     set_: Annotated[list[str] | None, typer.Option("--set", help="Override a field of every case.")] = None,
+    junit: JunitOpt = None,
 ) -> None:
     """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
     100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
     with guarded():
+        from rover_sim.bench.junit_cases import traverse_cases
         from rover_sim.bench.traverse import bench_traverse
 
         r = bench_traverse(str(json) if json else None, str(out), case or None, tuple(set_ or ()))
-    if not all(c["passed"] for c in r["cases"]):
-        raise typer.Exit(1)
+    finish(junit, "bench traverse", traverse_cases(r))
 
 
 @bench_app.command("dimes")
