@@ -94,3 +94,4 @@ class TerrainStreamer:
             model.geom_pos[gid], model.geom_quat[gid], model.geom_size[gid] = pos, quat, size
             model.geom_rbound[gid] = max(size)
             model.geom_aabb[gid] = [0.0, 0.0, 0.0, *size]
+            model.geom_conaffinity[gid] = 1 if i < len(window.rocks) else 0  # parked slots skip the pair tests
