@@ -49,7 +49,7 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
     """One case in this process (a spawn worker): run, write outputs, measure; the row of the table."""
     import numpy as np
 
-    from rover_sim.mission.run import write_outputs
+    from rover_sim.mission.run import sol_recording, write_outputs
     from rover_sim.io.recording import RerunRecorder
     from rover_sim.mission.pipeline import Mission
     from rover_sim.mission.scenario import load_scenario
@@ -57,7 +57,7 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
     sc = load_scenario(CASES[name], list(overrides))
     out = Path(out_dir) / name
     out.mkdir(parents=True, exist_ok=True)
-    rec = RerunRecorder(out / "recording.rrd", recording_name=sc.name)
+    rec = RerunRecorder(out / "recording.rrd", recording_name=sc.name, **sol_recording(sc))
     t0 = time.perf_counter()
     mission = Mission(sc, rec)
     probe = {"path_m": 0.0, "last": None, "rss_100m_mb": None}

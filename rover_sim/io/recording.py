@@ -56,6 +56,7 @@ from rover_sim.io.recording_helpers import (  # noqa: F401 - TERRAIN_MAX_TRIANGL
     ROCK_RGBA,
     ground_mesh,
     rocks_mesh,
+    tile_rocks,
     rover_visual,
     terrain_mesh_step,
     xyzw,
@@ -334,7 +335,7 @@ class RerunRecorder:
         step = max(1, math.ceil((max(terrain.nrow, terrain.ncol) - 1) / (TILE_MESH_SIDE_PTS - 1)))
         self._log(f"world/terrain/tiles/{key}", ground_mesh(terrain, step), static=True)
         if terrain.rocks:
-            self._log(f"world/terrain/tiles/{key}/rocks", rocks_mesh(terrain.rocks), static=True)
+            self._log(f"world/terrain/tiles/{key}/rocks", tile_rocks(terrain.rocks), static=True)
 
     def log_keep_out(self, name: str, x_m: float, y_m: float, radius_m: float, z_m: float) -> None:
         """Static circle; draped on the terrain (if logged) else drawn at ``z_m``. Re-logging replaces it."""

@@ -112,3 +112,20 @@ def rocks_mesh(rocks: list) -> rr.Mesh3D:
         .astype(np.uint32),
         albedo_factor=ROCK_RGBA,
     )
+
+
+def tile_rocks(rocks: list) -> rr.Ellipsoids3D | rr.Mesh3D:
+    """A streamed tile's rocks: ellipsoids (exact for its hemispheroids and semi-ellipsoids, about 40 bytes a
+    rock, centred on the base with the lower half under the ground), else their meshes."""
+    if any(r.shape not in ("hemispheroid", "semi_ellipsoid") for r in rocks):
+        return rocks_mesh(rocks)
+    half = np.array([[0.5 * r.length_m, 0.5 * r.width_m, r.height_m] for r in rocks], dtype=np.float32)
+    yaw = np.array([0.5 * r.yaw_rad for r in rocks])
+    quat_xyzw = np.stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw), np.cos(yaw)], axis=1)
+    return rr.Ellipsoids3D(
+        centers=np.array([[r.x_m, r.y_m, r.z_base_m] for r in rocks], dtype=np.float32),
+        half_sizes=half,
+        quaternions=quat_xyzw.astype(np.float32),
+        colors=[ROCK_RGBA],
+        fill_mode="solid",
+    )

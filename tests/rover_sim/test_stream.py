@@ -98,3 +98,22 @@ def test_window_textures_agree_texel_for_texel() -> None:
     assert ta.shape == (round(2 * a.half_y_m * 40), round(2 * a.half_x_m * 40))
     shift = site.tile_cells * 2  # one tile of texels at 2 texels per 5 cm cell
     np.testing.assert_array_equal(ta[:, shift:], tb[:, : ta.shape[1] - shift])
+
+
+def test_tiles_are_logged_once_and_compactly(tmp_path) -> None:
+    from rover_sim.io.recording import RerunRecorder
+    from rover_sim.io.rrd import entity_row_counts
+
+    st = TerrainStreamer(_recipe(cover=0.1), seed=5)
+    w0 = st.initial_window(0.0, 0.0)
+    first = st.new_tiles(w0)
+    assert len(first) == 9 and st.new_tiles(w0) == []  # each tile handed out once
+    again = st.new_tiles(st.site.window((1, 0)))
+    assert sorted(k for k, _ in again) == ["t2_-1", "t2_0", "t2_1"]
+    path = tmp_path / "tiles.rrd"
+    with RerunRecorder(path) as rec:
+        for key, tile in first + again:
+            rec.log_terrain_tile(key, tile)
+    rows = entity_row_counts(path)
+    assert rows["/world/terrain/tiles/t0_0"] == 1 and "/world/terrain/tiles/t2_1" in rows
+    assert path.stat().st_size < 12 * 60_000  # about 60 kB a 4 m tile with its rocks, at most
