@@ -111,11 +111,14 @@ def write_setup_outputs(sc: Scenario, metrics: Metrics, out_dir: Path) -> None:
 
 SOL_TRACK_SPACING_M = 0.1  # a sol's drive: track vertices 10 cm apart ...
 SOL_TRACK_BLOCK_POINTS = 32  # ... in short blocks, so each track update re-sends little (recording ~ distance)
+SOL_MAX_POINTS = 5000  # stereo point clouds subsampled to this (a full navcam cloud is about 600 kB)
 
 
 def sol_recording(sc: Scenario) -> dict:
     """Recorder settings that keep a sol-scale drive's recording compact (none for other scenarios)."""
-    return {} if sc.sol is None else {"min_spacing_m": SOL_TRACK_SPACING_M, "segment_points": SOL_TRACK_BLOCK_POINTS}
+    if sc.sol is None:
+        return {}
+    return {"min_spacing_m": SOL_TRACK_SPACING_M, "segment_points": SOL_TRACK_BLOCK_POINTS, "max_points": SOL_MAX_POINTS}
 
 
 def run_scenario(
