@@ -228,6 +228,9 @@ class RoverEnv(gymnasium.Env):
 
         self._close_world()
         sc = self.scenario.model_copy(update={"seed": world_seed})
+        if sc.terrain.streamed is not None:
+            raise ValueError(f"scenario {sc.name!r}: the Gymnasium environment needs a whole-site terrain; "
+                             "remove [terrain.streamed] (streamed sites run with `rover-sim run`)")  # fmt: skip
         terrain = synthesize(sc.terrain, world_seed)
         side = 2.0 * max(terrain.half_x_m, terrain.half_y_m)
         px_per_m = min(sc.appearance.texture_px_per_m, MAX_TEXTURE_SIDE_PX / side)

@@ -318,6 +318,41 @@ class MaterialSpec(_Spec):
         return self
 
 
+class StreamSpec(_Spec):
+    """``[terrain.streamed]``: synthesise the site tile by tile around the rover (see :mod:`terrains.stream`).
+
+    The physics heightfield and the render model then cover ``window_tiles`` x ``window_tiles`` tiles around
+    the rover's tile and move with it; ``size_m`` is ignored. Landforms beyond the recipe's slope, roughness,
+    explicit craters and rocks: hills and random degraded craters (up to Endurance's 130 m).
+    """
+
+    tile_m: float = Field(8.0, ge=2.0, le=50.0, description="Tile side, metres (rounded to whole cells).")
+    window_tiles: int = Field(3, ge=3, le=9, description="Window side in tiles (odd): the rover's tile +- k//2.")
+    rock_slots: int = Field(800, ge=16, le=5000, description="Most rocks a window holds (primitive geom pool).")
+    hill_amplitude_m: float = Field(0.0, ge=0.0, le=20.0, description="Std of the hills' height, metres.")
+    hill_wavelength_m: float = Field(80.0, ge=10.0, le=2000.0, description="Hill spacing, metres.")
+    crater_density_per_km2: float = Field(0.0, ge=0.0, le=200.0, description="Random craters per km^2.")
+    crater_min_diameter_m: float = Field(10.0, ge=2.0, le=130.0)
+    crater_max_diameter_m: float = Field(130.0, ge=2.0, le=130.0, description="Endurance is about 130 m.")
+    crater_depth_to_diameter: float = Field(0.08, ge=0.05, le=0.3, description="Degraded bowls: shallower.")
+    crater_rim_height_frac: float = Field(0.02, ge=0.0, le=0.1)
+    crater_free_zones: list[Disc] = Field(default_factory=list, max_length=200,
+                                          description="No random crater reaches into these discs (the route).")
+
+    @field_validator("window_tiles")
+    @classmethod
+    def _odd(cls, v: int) -> int:
+        if v % 2 == 0:
+            raise ValueError(f"window_tiles must be odd (3, 5, 7, 9), got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _diameters(self) -> StreamSpec:
+        if self.crater_min_diameter_m > self.crater_max_diameter_m:
+            raise ValueError("crater_min_diameter_m must be <= crater_max_diameter_m")
+        return self
+
+
 class TerrainRecipe(_Spec):
     """Everything that shapes a terrain patch; ``synthesize(recipe, seed)`` turns it into a :class:`Terrain`.
 
@@ -336,6 +371,7 @@ class TerrainRecipe(_Spec):
     rocks: RockSpec = Field(default_factory=RockSpec)
     explicit_rocks: list[ExplicitRockSpec] = Field(default_factory=list)
     material: MaterialSpec = Field(default_factory=MaterialSpec)
+    streamed: StreamSpec | None = Field(None, description="Stream the site tile by tile (large sites).")
 
     @property
     def grid_shape(self) -> tuple[int, int]:

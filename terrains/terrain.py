@@ -350,6 +350,11 @@ class Terrain:
         return 0.5 * (self.nrow - 1) * self.cell_size_m
 
     @property
+    def origin_xy_m(self) -> tuple[float, float]:
+        """World point at the grid's centre: the origin here; a streamed window sits elsewhere (terrains.stream)."""
+        return (0.0, 0.0)
+
+    @property
     def xs_m(self) -> np.ndarray:
         """x of each column, ``(ncol,)``."""
         return -self.half_x_m + np.arange(self.ncol) * self.cell_size_m

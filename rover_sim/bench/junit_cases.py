@@ -176,3 +176,8 @@ def rocks_cases(result: dict) -> list[Case]:
     checks.append(("chain adjustment beats DR and VO", c["adjusted"] < min(c["dead_reckoning"], c["vo"]),
                    f"adjusted {c['adjusted']:.3f} m, DR {c['dead_reckoning']:.3f} m, VO {c['vo']:.3f} m"))  # fmt: skip
     return [case(name, "bench.rocks", ok, msg) for name, ok, msg in checks]
+
+
+def traverse_cases(result: dict) -> list[Case]:
+    """`bench traverse`: one case per drive, failing with the unmet issue-18 bars."""
+    return [case(r["name"], "bench.traverse", r["passed"], r["why"]) for r in result["details"]]

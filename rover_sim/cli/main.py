@@ -151,6 +151,26 @@ def bench_autonav_cmd(
     finish(junit, "bench autonav", cases)
 
 
+@bench_app.command("traverse")
+def bench_traverse_cmd(
+    json: JsonOpt = None,
+    case: Annotated[list[str] | None, typer.Option(help="Run only these cases (repeatable).")] = None,
+    out: Annotated[Path, typer.Option(help="Where each case writes its outputs and recording.")] = Path(
+        "runs/bench_traverse"
+    ),
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a field of every case.")] = None,
+    junit: JunitOpt = None,
+) -> None:
+    """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
+    100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
+    with guarded():
+        from rover_sim.bench.junit_cases import traverse_cases
+        from rover_sim.bench.traverse import bench_traverse
+
+        r = bench_traverse(str(json) if json else None, str(out), case or None, tuple(set_ or ()))
+    finish(junit, "bench traverse", traverse_cases(r))
+
+
 @bench_app.command("dimes")
 def bench_dimes_cmd(
     json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50, junit: JunitOpt = None

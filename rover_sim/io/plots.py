@@ -116,7 +116,8 @@ def plot_error_vs_distance(
 def _view_bounds(
     terrain: Terrain, xy: list[np.ndarray], keep_out: list[tuple[str, float, float, float]], margin_m: float | None
 ) -> tuple[float, float, float, float]:
-    full = (-terrain.half_x_m, terrain.half_x_m, -terrain.half_y_m, terrain.half_y_m)
+    ox, oy = terrain.origin_xy_m  # a streamed site's window is centred there (the view is clipped to it)
+    full = (ox - terrain.half_x_m, ox + terrain.half_x_m, oy - terrain.half_y_m, oy + terrain.half_y_m)
     pts = [p for p in xy if len(p)]
     pts += [np.array([[x - r, y - r], [x + r, y + r]]) for _, x, y, r in keep_out]
     if margin_m is None or not pts:

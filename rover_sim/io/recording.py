@@ -5,6 +5,7 @@ The entity tree mirrors the frame tree (rerun ``nuscenes`` example style)::
     world                                   ViewCoordinates RIGHT_HAND_Z_UP (x east, y north, z up), static
     world/terrain                           Mesh3D coloured by material, static
     world/terrain/rocks                     Mesh3D of every rock, static
+    world/terrain/tiles/t<x>_<y>[/rocks]    a streamed site: each tile once, coarse, when it first appears
     world/rover                             Transform3D (world <- rover) every tick
     world/rover/visual                      Boxes3D + Cylinders3D (body, deck, mast, 6 wheels), static
     world/rover/<camera>/{left,right}       Transform3D (rover <- camera, from T_rover_cam; re-logged only when it
@@ -48,15 +49,21 @@ import rerun.blueprint as rrb
 
 from rover_sim.io.blueprint import default_blueprint
 from rover_sim.io.recording_helpers import (  # noqa: F401 - TERRAIN_MAX_TRIANGLES re-exported from here
+    ROCK_RGBA,
     TERRAIN_MAX_TRIANGLES,
     PolylineState,
     colour_of,
+    ground_mesh,
     ramp_red_green,
+    rocks_mesh,
     rover_visual,
     terrain_mesh_step,
+    tile_rocks,
     xyzw,
 )
 from rover_sim.io.rrd import entity_row_counts  # noqa: F401 - re-exported from here
+
+TILE_MESH_SIDE_PTS = 33  # a streamed tile's mesh in the recording: 25 cm spacing for an 8 m tile
 
 if TYPE_CHECKING:
     from nav.camera import StereoRig
@@ -70,7 +77,7 @@ POINTS_MAX = 50_000  # larger point clouds are subsampled (evenly, deterministic
 CAMERA_PLANE_DISTANCE_M = 0.25  # how far in front of the camera the viewer draws the image plane / frustum
 LEVELS = ("TRACE", "DEBUG", "INFO", "WARN", "ERROR", "CRITICAL")
 
-_ROCK_RGBA = (120, 104, 92, 255)
+_ROCK_RGBA = ROCK_RGBA
 _UNKNOWN_RGBA = (128, 128, 128, 140)
 _VETOED_RGBA = (70, 70, 70, 255)
 _CHOSEN_RGBA = (0, 255, 255, 255)
@@ -94,6 +101,8 @@ class Recorder(Protocol):
     def wants_images(self) -> bool: ...
 
     def log_terrain(self, terrain: Terrain) -> None: ...
+
+    def log_terrain_tile(self, key: str, terrain: Terrain) -> None: ...
 
     def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None: ...
 
@@ -160,6 +169,9 @@ class NullRecorder:
         return False
 
     def log_terrain(self, terrain: Terrain) -> None:
+        pass
+
+    def log_terrain_tile(self, key: str, terrain: Terrain) -> None:
         pass
 
     def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None:
@@ -311,34 +323,19 @@ class RerunRecorder:
     def log_terrain(self, terrain: Terrain) -> None:
         """Static ground mesh (material colours) and rock meshes. Keep-out circles drape on it afterwards."""
         self._terrain = terrain
-        mesh = terrain.to_mesh(step=terrain_mesh_step(terrain.nrow, terrain.ncol), colour_by_material=True)
-        self._log(
-            "world/terrain",
-            rr.Mesh3D(
-                vertex_positions=np.asarray(mesh.vertices, dtype=np.float32),
-                triangle_indices=np.asarray(mesh.faces, dtype=np.uint32),
-                vertex_normals=np.asarray(mesh.vertex_normals, dtype=np.float32),
-                vertex_colors=np.asarray(mesh.visual.vertex_colors, dtype=np.uint8),
-            ),
-            static=True,
-        )
+        self._log("world/terrain", ground_mesh(terrain, terrain_mesh_step(terrain.nrow, terrain.ncol)), static=True)
         if terrain.rocks:
-            vertices, faces, offset = [], [], 0
-            for rock in terrain.rocks:
-                m = rock.mesh()
-                vertices.append(np.asarray(m.vertices))
-                faces.append(np.asarray(m.faces) + offset)
-                offset += len(m.vertices)
-            v = np.concatenate(vertices).astype(np.float32)
-            self._log(
-                "world/terrain/rocks",
-                rr.Mesh3D(
-                    vertex_positions=v,
-                    triangle_indices=np.concatenate(faces).astype(np.uint32),
-                    albedo_factor=_ROCK_RGBA,
-                ),
-                static=True,
-            )
+            self._log("world/terrain/rocks", rocks_mesh(terrain.rocks), static=True)
+
+    def log_terrain_tile(self, key: str, terrain: Terrain) -> None:
+        """One tile of a streamed site, logged once when it first appears (static, coarse: about
+        ``TILE_MESH_SIDE_PTS`` points a side, so the recording grows linearly and slowly with distance)."""
+        if self._terrain is None:
+            self._terrain = terrain  # keep-out circles drape on the first tile's window
+        step = max(1, math.ceil((max(terrain.nrow, terrain.ncol) - 1) / (TILE_MESH_SIDE_PTS - 1)))
+        self._log(f"world/terrain/tiles/{key}", ground_mesh(terrain, step), static=True)
+        if terrain.rocks:
+            self._log(f"world/terrain/tiles/{key}/rocks", tile_rocks(terrain.rocks), static=True)
 
     def log_keep_out(self, name: str, x_m: float, y_m: float, radius_m: float, z_m: float) -> None:
         """Static circle; draped on the terrain (if logged) else drawn at ``z_m``. Re-logging replaces it."""

@@ -5,9 +5,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
+
+if TYPE_CHECKING:
+    from terrains import Terrain
 
 TERRAIN_MAX_TRIANGLES = 200_000  # finer terrain grids are decimated (Terrain.to_mesh(step=...)) below this
 
@@ -81,3 +85,46 @@ class PolylineState:
     last_in: np.ndarray | None = None  # the last consumed input point, to detect a rewritten history
     block: int = 0  # index of the open block
     kept: list[np.ndarray] = field(default_factory=list)  # vertices of the open block
+
+
+ROCK_RGBA = (120, 104, 92, 255)
+
+
+def ground_mesh(terrain: Terrain, step: int) -> rr.Mesh3D:
+    """The heightfield every ``step`` cells, coloured by material."""
+    mesh = terrain.to_mesh(step=step, colour_by_material=True)
+    return rr.Mesh3D(
+        vertex_positions=np.asarray(mesh.vertices, dtype=np.float32),
+        triangle_indices=np.asarray(mesh.faces, dtype=np.uint32),
+        vertex_normals=np.asarray(mesh.vertex_normals, dtype=np.float32),
+        vertex_colors=np.asarray(mesh.visual.vertex_colors, dtype=np.uint8),
+    )
+
+
+def rocks_mesh(rocks: list) -> rr.Mesh3D:
+    """All ``rocks`` as one mesh (their analytic shapes, world frame)."""
+    meshes = [rock.mesh() for rock in rocks]
+    offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+    return rr.Mesh3D(
+        vertex_positions=np.concatenate([np.asarray(m.vertices) for m in meshes]).astype(np.float32),
+        triangle_indices=np.concatenate([np.asarray(m.faces) + o for m, o in zip(meshes, offsets, strict=True)])
+        .astype(np.uint32),
+        albedo_factor=ROCK_RGBA,
+    )
+
+
+def tile_rocks(rocks: list) -> rr.Ellipsoids3D | rr.Mesh3D:
+    """A streamed tile's rocks: ellipsoids (exact for its hemispheroids and semi-ellipsoids, about 40 bytes a
+    rock, centred on the base with the lower half under the ground), else their meshes."""
+    if any(r.shape not in ("hemispheroid", "semi_ellipsoid") for r in rocks):
+        return rocks_mesh(rocks)
+    half = np.array([[0.5 * r.length_m, 0.5 * r.width_m, r.height_m] for r in rocks], dtype=np.float32)
+    yaw = np.array([0.5 * r.yaw_rad for r in rocks])
+    quat_xyzw = np.stack([np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw), np.cos(yaw)], axis=1)
+    return rr.Ellipsoids3D(
+        centers=np.array([[r.x_m, r.y_m, r.z_base_m] for r in rocks], dtype=np.float32),
+        half_sizes=half,
+        quaternions=quat_xyzw.astype(np.float32),
+        colors=[ROCK_RGBA],
+        fill_mode="solid",
+    )

@@ -35,6 +35,7 @@ from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
 from rover_sim.mission.pointing import seek_texture
 from rover_sim.mission.rover_shape import rover_shape
 from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, TurnCmd
+from rover_sim.mission.sol import BudgetSpent, SolBudget
 from rover_sim.mission.world import World
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
 from rover_sim.sim.physics import RoverSim
@@ -51,6 +52,34 @@ class Halt(Exception):
     def __init__(self, kind: str, detail: str) -> None:
         self.kind, self.detail = kind, detail
         super().__init__(f"{kind}: {detail}")
+
+
+def _tilt_deg(R_world_rover: np.ndarray) -> float:
+    return math.degrees(math.acos(min(max(float(R_world_rover[2, 2]), -1.0), 1.0)))
+
+
+class _TrackBuffers:
+    """Positions of each pose list in a growing array, so logging a track costs its new poses only (the recorder
+    takes the whole history and sends what is new; rebuilding it from the poses each time was quadratic)."""
+
+    def __init__(self) -> None:
+        self._buf: dict[str, np.ndarray] = {}
+        self._n: dict[str, int] = {}
+
+    def positions(self, name: str, poses: list[Pose]) -> np.ndarray:
+        n = self._n.get(name, 0)
+        if len(poses) < n:  # the list was rewritten: start over
+            n = 0
+        buf = self._buf.get(name)
+        if buf is None or len(buf) < len(poses):
+            grown = np.zeros((max(2 * len(poses), 64), 3))
+            if buf is not None:
+                grown[:n] = buf[:n]
+            buf = self._buf[name] = grown
+        for k in range(n, len(poses)):
+            buf[k] = poses[k].position_xyz_m
+        self._n[name] = len(poses)
+        return buf[: len(poses)]
 
 
 def _wrap(a: float) -> float:
@@ -97,6 +126,11 @@ class Mission:
         self.image_listeners: list[Callable[[Observation, Pose], None]] = []  # every stereo pair the rover takes
         self.extra_timing: dict = {}
         self._wall_s = 0.0
+        # a sol's drive (issue #18): budgets, mission clock, decimated poses and tracks, streamed terrain tiles
+        self.sol: SolBudget | None = SolBudget(scenario.sol, self.world.clock) if scenario.sol is not None else None
+        self.pose_stride = scenario.sol.pose_stride if scenario.sol is not None else 1
+        self._tracks = _TrackBuffers()
+        self._terrain_version = -1
 
     # ------------------------------------------------------------------ convenience views
     @property
@@ -132,6 +166,8 @@ class Mission:
             for i, cmd in enumerate(self.sc.commands):
                 self.event(f"command {i}: {cmd.type}")
                 self.run_command(cmd)
+        except BudgetSpent as b:  # the day's drive is over: an outcome, not a halt
+            self.event(f"sol: {b}")
         except Halt as h:
             self.halted = h
             self.event(f"HALT {h.kind}: {h.detail}", "WARN")
@@ -147,6 +183,8 @@ class Mission:
         return self.metrics(time.perf_counter() - t0)
 
     def run_command(self, cmd) -> None:  # noqa: ANN001
+        if self.sol is not None:
+            self.sol.mode = "autonav" if isinstance(cmd, AutonavCmd) else "blind"
         if isinstance(cmd, DriveCmd):
             self.drive_with_vo(Straight(cmd.distance_m), abs(cmd.distance_m))
         elif isinstance(cmd, ArcCmd):
@@ -190,12 +228,19 @@ class Mission:
             self.execute(prim)
             return
         n = max(1, math.ceil(length_m / self.sc.nav.vo_step_m - 1e-9))
+        slope_deg = self.sc.sol.vo_min_slope_deg if self.sc.sol is not None else None
         for _ in range(n):
             piece = (
                 Straight(prim.distance_m / n) if isinstance(prim, Straight) else Arc(prim.radius_m, prim.distance_m / n)
             )
+            on_slope = slope_deg is None or _tilt_deg(self.onboard.pose.R_world_rover) > slope_deg
+            if self.sol is not None:
+                self.sol.mode = "blind_vo" if on_slope else "blind"
             self.execute(piece)
-            self.vo_update()
+            if on_slope:
+                self.vo_update()
+            else:  # flat ground: no VO pair (MER); the next VO step on a slope starts afresh
+                self.onboard.reset_vo()
 
     def goto(self, cmd: GotoCmd) -> None:
         """Drive to (x, y) on the onboard pose: turn toward the goal, drive a VO step, repeat (Sol 304 style)."""
@@ -226,7 +271,8 @@ class Mission:
         sim = self.sim
         obs = self.world.observation()
         self.onboard.observe(obs)
-        truth = self.record_poses()
+        keep = self.step % self.pose_stride == 0
+        truth = self.record_poses() if keep else self.world.truth_pose()
         for listener in self.tick_listeners:
             listener(obs, truth)
         tall = sim.rock_contacts(TALL_ROCK_M)
@@ -235,12 +281,18 @@ class Mission:
             self.event(f"contact with a rock taller than {TALL_ROCK_M} m: {tall[0]}", "WARN")
         self.step += 1
         t = sim.time_s
-        self.rec.log_rover_pose(t, self.step, truth.position_xyz_m, truth.quat_wxyz)
-        if self.step % 4 == 0:
+        if keep:
+            self.rec.log_rover_pose(t, self.step, truth.position_xyz_m, truth.quat_wxyz)
+        if self.step % (4 * self.pose_stride) == 0:
             self.log_tracks(t)
+        if sim.terrain_version != self._terrain_version:
+            self.log_terrain_tiles()
         if self.progress is not None:
             self.progress(t, "")
         self.check_keep_out()
+        if self.sol is not None:
+            self.world.sync_clock()
+            self.sol.on_tick(t, truth.position_xyz_m, self.onboard.dead_reckoning.distance_m)
         if sim.soil_model != "bekker":  # experimental soil only: left_terrain / slid_down_slope halts (issue #13)
             issue = sim.safety_issue()
             if issue is not None:
@@ -329,8 +381,18 @@ class Mission:
         self.events.append(f"[{self.sim.time_s:8.2f}s] {level}: {text}")
         self.rec.log_event(self.sim.time_s, self.step, text, level)
 
+    def log_terrain_tiles(self) -> None:
+        """A streamed site: log the tiles of the current window not logged before (each tile once)."""
+        self._terrain_version = self.sim.terrain_version
+        if self.sim.streamer is not None:
+            for key, tile_terrain in self.sim.streamer.new_tiles(self.terrain):
+                self.rec.log_terrain_tile(key, tile_terrain)
+
     def log_static(self) -> None:
-        self.rec.log_terrain(self.terrain)
+        if self.sim.streamer is not None:
+            self.log_terrain_tiles()
+        else:
+            self.rec.log_terrain(self.terrain)
         for z in self.sc.keep_out:
             self.rec.log_keep_out(z.name, z.x_m, z.y_m, z.radius_m, float(self.terrain.height_at(z.x_m, z.y_m)))
         self.rec.log_camera(self.sc.nav.camera, self.world.onboard_rig(self.sc.nav.camera), self.sim.time_s)
@@ -338,9 +400,9 @@ class Mission:
     def log_tracks(self, t: float) -> None:
         ev = self.evaluator
         for name, poses in (("truth", ev.truth), ("dead_reckoning", ev.dr_poses)):
-            self.rec.log_trajectory(name, t, self.step, np.array([p.position_xyz_m for p in poses]))
+            self.rec.log_trajectory(name, t, self.step, self._tracks.positions(name, poses))
         if self.onboard.vo is not None:
-            self.rec.log_trajectory("vo", t, self.step, np.array([p.position_xyz_m for p in ev.onboard_poses]))
+            self.rec.log_trajectory("vo", t, self.step, self._tracks.positions("vo", ev.onboard_poses))
         truth = ev.truth[-1]
         rpy = R_to_rpy(truth.R_world_rover)
         gt = self.sim.ground_truth()
@@ -409,6 +471,12 @@ class Mission:
             if self.autonav_stats.cycle_ms:
                 timing["autonav_cycle_ms_median"] = round(float(np.median(self.autonav_stats.cycle_ms)), 1)
         timing["realtime_factor"] = round(self.sim.time_s / max(wall_s, 1e-9), 1)
+        if self.sol is not None:
+            extra["sol"] = self.sol.summary()
+        if self.sim.streamer is not None:
+            st = self.sim.streamer
+            extra["streamed_terrain"] = {"recentres": st.recentres, "tiles_built": st.site.tiles_built,
+                                         "rocks_dropped": st.rocks_dropped}  # fmt: skip
         m = self.evaluator.metrics(
             wall_s=wall_s,
             sim_s=self.sim.time_s,

@@ -109,6 +109,22 @@ def write_setup_outputs(sc: Scenario, metrics: Metrics, out_dir: Path) -> None:
     (out_dir / "events.log").write_text(f"[    0.00s] ERROR: {metrics.reason.removeprefix('run did not complete: ')}\n")
 
 
+SOL_TRACK_SPACING_M = 0.1  # a sol's drive: track vertices 10 cm apart ...
+SOL_TRACK_BLOCK_POINTS = 32  # ... in short blocks, so each track update re-sends little (recording ~ distance)
+SOL_MAX_POINTS = 5000  # stereo point clouds subsampled to this (a full navcam cloud is about 600 kB)
+
+
+def sol_recording(sc: Scenario) -> dict:
+    """Recorder settings that keep a sol-scale drive's recording compact (none for other scenarios)."""
+    if sc.sol is None:
+        return {}
+    return {
+        "min_spacing_m": SOL_TRACK_SPACING_M,
+        "segment_points": SOL_TRACK_BLOCK_POINTS,
+        "max_points": SOL_MAX_POINTS,
+    }
+
+
 def run_scenario(
     scenario: str | Path | Scenario,
     out_dir: Path | None,
@@ -148,7 +164,12 @@ def _run(
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
     rec: Recorder = (
-        RerunRecorder(out_dir / "recording.rrd", recording_name=sc.name, blueprint=blueprint_for(layout_of(sc)))
+        RerunRecorder(
+            out_dir / "recording.rrd",
+            recording_name=sc.name,
+            blueprint=blueprint_for(layout_of(sc)),
+            **sol_recording(sc),
+        )  # fmt: skip
         if (record and out_dir)
         else NullRecorder()
     )

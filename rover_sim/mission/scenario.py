@@ -133,8 +133,9 @@ class VoSpec(_Spec):
     shadow_mask: bool = Field(True, description="Bar features in and near the rover's predicted shadow (issue #17).")
     seek_texture: bool = Field(True, description="Repoint the mast at texture when the planned view is poor.")
     update: Literal["position", "full_pose"] = Field(
-        "position", description="What an accepted VO step corrects: 'position' (MER: the IMU keeps attitude) or "
-        "'full_pose' (attitude too)."
+        "position",
+        description="What an accepted VO step corrects: 'position' (MER: the IMU keeps attitude) or "
+        "'full_pose' (attitude too).",
     )
 
     @model_validator(mode="before")
@@ -278,6 +279,21 @@ class PassSpec(_Spec):
     )
 
 
+class SolSpec(_Spec):
+    """``[sol]``: the day's drive as MER flew it (issue #18): the commands run until the drive-time budget (mission
+    clock: driving + imaging + computing, ``rover_sim/mission/clock.py``) or the odometry distance budget is spent.
+    Long drives keep fewer poses (``pose_stride``) so memory and the recording grow slowly with distance."""
+
+    max_time_s: float = Field(gt=0.0, le=86400.0, description="Drive-time budget on the mission clock, s.")
+    max_distance_m: float | None = Field(None, gt=0.0, le=5000.0, description="Odometry distance budget, m.")
+    start_local_solar_time_h: float = Field(11.0, ge=0.0, lt=24.0, description="Local solar time at the start.")
+    pose_stride: int = Field(1, ge=1, le=64, description="Ticks (8 Hz) between kept poses and logged poses.")
+    vo_min_slope_deg: float | None = Field(
+        None, ge=0.0, le=45.0, description="Blind drives image VO only where the onboard tilt exceeds this (MER)."
+    )
+    benchmark_only: bool = Field(False, description="A bench traverse case, not part of the scenario catalogue.")
+
+
 SOIL_MODEL_DEFAULTS = {"soil_model": "bekker", "deformable": False}
 
 
@@ -315,6 +331,7 @@ class Scenario(_Spec):
     physics: PhysicsSpec = Field(default_factory=PhysicsSpec)
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
     fast: bool = Field(False, description="Part of the fast CI suite.")
+    sol: SolSpec | None = Field(None, description="Drive-time and distance budgets of a sol's drive (issue #18).")
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)
 
@@ -336,6 +353,10 @@ class Scenario(_Spec):
         for key, default in SOIL_MODEL_DEFAULTS.items():
             if d["physics"].get(key) == default:
                 del d["physics"][key]
+        if d["terrain"].get("streamed", 0) is None:  # opt-in streaming: whole-site scenario.json files unchanged
+            del d["terrain"]["streamed"]
+        if d.get("sol", 0) is None:
+            del d["sol"]
         return d
 
 

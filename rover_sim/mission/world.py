@@ -12,6 +12,7 @@ Mast convention (one everywhere): ``pan_deg`` left positive, ``elevation_deg`` u
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from types import MappingProxyType
 
 import numpy as np
@@ -27,12 +28,18 @@ from rover_sim.mission.scenario import Scenario
 from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoFrame, StereoRenderer, terrain_texture
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.sensors import OdometryErrors, SensorSuite
+from rover_sim.sim.stream import TerrainStreamer
 from rover_sim.sim.world import Sun
-from terrains import Terrain, synthesize
+from terrains import Terrain, synthesize, texture_rgb_u8
 
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB
 RELIEF_REBAKE_DEG = 3.0  # re-shade the soil's micro-relief when the sun has moved more than this (12 min of sun)
 SETTLE_S = 1.0  # the rover settles on the terrain before the run starts
+
+
+def _window_painter(streamer: TerrainStreamer, px_per_m: float, contrast: float) -> Callable[[Terrain], np.ndarray]:
+    """Texture of a streamed window from world-coordinate albedo, per tile (``StreamedSite.window_albedo``)."""
+    return lambda window: texture_rgb_u8(streamer.site.window_albedo(window, px_per_m, contrast))
 
 
 def texture_px_per_m(terrain: Terrain, wanted_px_per_m: float) -> float:
@@ -50,23 +57,50 @@ def with_heading_error(pose: Pose, heading_error_rad: float) -> Pose:
     return Pose(pose.t_s, pose.position_xyz_m, R_to_quat_wxyz(Rz @ pose.R_world_rover))
 
 
+def ground_texture(scenario: Scenario, terrain: Terrain, sun_direction: np.ndarray) -> np.ndarray:
+    """The ground's RGB texture of a whole-site terrain (multiscale regolith: micro-relief shaded for
+    ``sun_direction``)."""
+    ap = scenario.appearance
+    return terrain_texture(
+        terrain,
+        texture_px_per_m(terrain, ap.texture_px_per_m),
+        scenario.seed,
+        fine_soil=ap.fine_soil,
+        contrast=ap.contrast,
+        patches=ap.patch_tuples(),
+        regolith=ap.regolith,
+        sun_direction=sun_direction if ap.regolith == "multiscale" else None,
+    )
+
+
 class World:
     """Terrain + physics + sensors + renderer for ``scenario``; the rover placed at its start and settled."""
 
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
-        self.terrain = synthesize(scenario.terrain, scenario.seed)
-        lst = scenario.sun.local_solar_time_h  # set: the sun moves with the mission clock (issue #16 item 4)
-        self.clock = MissionClock(lst) if lst is not None else None
+        ap = scenario.appearance
+        # the mission clock: with a moving sun (issue #16 item 4) or a sol's time budget (issue #18)
+        lst = scenario.sun.local_solar_time_h
+        start_h = lst if lst is not None else (scenario.sol.start_local_solar_time_h if scenario.sol else None)
+        self.clock = MissionClock(start_h) if start_h is not None else None
         sun_az_deg, sun_el_deg = scenario.sun.azimuth_elevation_at(lst)
         self._baked_sun = Sun(sun_az_deg, sun_el_deg).direction()  # the sun the soil's micro-relief is shaded for
-        texture = self.ground_texture(self._baked_sun)
+        self.streamer, texture, texture_fn = None, None, None
+        if scenario.terrain.streamed is not None:  # large sites: a window of tiles follows the rover
+            self.streamer = TerrainStreamer(scenario.terrain, scenario.seed)
+            terrain = self.streamer.initial_window(scenario.start.x_m, scenario.start.y_m)
+            texture_fn = _window_painter(self.streamer, texture_px_per_m(terrain, ap.texture_px_per_m), ap.contrast)
+        else:
+            terrain = synthesize(scenario.terrain, scenario.seed)
+            texture = ground_texture(scenario, terrain, self._baked_sun)
         self.sim = RoverSim(
-            self.terrain,
+            terrain,
             Sun(sun_az_deg, sun_el_deg, scenario.sun.shadows),
             texture_rgb=texture,
             timestep_s=scenario.physics.timestep_s,
             soil_model=scenario.physics.soil_model,
+            streamer=self.streamer,
+            texture_fn=texture_fn,
         )
         if scenario.physics.deformable:  # experimental, wong_reece only: ruts, berms, multipass (sim/deform.py)
             self.sim.enable_deformation()
@@ -110,6 +144,11 @@ class World:
             Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz()), self.odometry_errors.heading_error_rad
         )
 
+    @property
+    def terrain(self) -> Terrain:
+        """The terrain under the rover (for a streamed site: the current window)."""
+        return self.sim.terrain
+
     # ------------------------------------------------------------------ commands to the hardware
     def point_mast(self, pan_deg: float, elevation_deg: float) -> None:
         """Command the mast (pan left positive, elevation up positive); the servos move as physics steps."""
@@ -151,11 +190,17 @@ class World:
     def render(self, camera: str) -> StereoFrame:
         """Take a stereo pair; with a mission clock, the sun is first moved to the time of day of the pair."""
         if self.clock is not None:
-            self.charge("driving", self.sim.time_s - self._clock_sim_s)
-            self._clock_sim_s = self.sim.time_s
-            self.move_sun()
+            self.sync_clock()
+            if self.scenario.sun.local_solar_time_h is not None:
+                self.move_sun()
             self.clock.charge("imaging", IMAGE_PAIR_ACQUIRE_S)
         return self.renderer.render_pair(camera)
+
+    def sync_clock(self) -> None:
+        """Charge the physics time driven since the last sync as driving (no-op without a clock)."""
+        if self.clock is not None:
+            self.clock.charge("driving", max(self.sim.time_s - self._clock_sim_s, 0.0))
+            self._clock_sim_s = self.sim.time_s
 
     # ------------------------------------------------------------------ time of day (mission clock)
     def charge(self, activity: Activity, seconds: float) -> None:
@@ -170,30 +215,16 @@ class World:
         self.sun_direction_world = Sun(az, el).direction()
         self.renderer.set_sun(self.sun_direction_world)
         moved_deg = math.degrees(math.acos(min(1.0, float(self._baked_sun @ self.sun_direction_world))))
-        if self.scenario.appearance.regolith == "multiscale" and moved_deg > RELIEF_REBAKE_DEG:
+        streamed = self.streamer is not None  # streamed windows are painted per tile (classic albedo)
+        if self.scenario.appearance.regolith == "multiscale" and moved_deg > RELIEF_REBAKE_DEG and not streamed:
             self._baked_sun = self.sun_direction_world
-            self.renderer.set_ground_texture(self.ground_texture(self._baked_sun))
-
-    def ground_texture(self, sun_direction: np.ndarray) -> np.ndarray:
-        """The ground's RGB texture (multiscale regolith: its micro-relief shaded for ``sun_direction``)."""
-        ap = self.scenario.appearance
-        return terrain_texture(
-            self.terrain,
-            texture_px_per_m(self.terrain, ap.texture_px_per_m),
-            self.scenario.seed,
-            fine_soil=ap.fine_soil,
-            contrast=ap.contrast,
-            patches=ap.patch_tuples(),
-            regolith=ap.regolith,
-            sun_direction=sun_direction if ap.regolith == "multiscale" else None,
-        )
+            self.renderer.set_ground_texture(ground_texture(self.scenario, self.terrain, self._baked_sun))
 
     def clock_summary(self) -> dict | None:
         """The mission clock for metrics.json (None without one); driving charged up to now."""
         if self.clock is None:
             return None
-        self.charge("driving", self.sim.time_s - self._clock_sim_s)
-        self._clock_sim_s = self.sim.time_s
+        self.sync_clock()
         return self.clock.summary()
 
     def observation_with(self, imu: list, encoders: list, frames: dict[str, StereoFrame]) -> Observation:

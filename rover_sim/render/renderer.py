@@ -259,9 +259,14 @@ def _rock_appearance(spec: mujoco.MjSpec, terrain: Terrain) -> tuple[list[str], 
     for i, rock in enumerate(terrain.rocks):
         name = f"{ROCK_GEOM_PREFIX}{i:04d}"
         mesh = spec.mesh(name)
-        verts = np.asarray(mesh.uservert, dtype=float).reshape(-1, 3)
-        s = verts[:, :2] + ROCK_TEXTURE_SLANT * verts[:, 2:3]
-        mesh.usertexcoord = (s / ROCK_TEXTURE_SCALE_M).ravel().tolist()
+        if mesh is None:  # a streamed rock slot: an ellipsoid primitive (sim/world.py), boxed by its footprint
+            r = rock.footprint_radius_m
+            verts = np.array([[rock.x_m - r, rock.y_m - r, rock.z_base_m - rock.height_m],
+                              [rock.x_m + r, rock.y_m + r, rock.z_base_m + rock.height_m]])  # fmt: skip
+        else:
+            verts = np.asarray(mesh.uservert, dtype=float).reshape(-1, 3)
+            s = verts[:, :2] + ROCK_TEXTURE_SLANT * verts[:, 2:3]
+            mesh.usertexcoord = (s / ROCK_TEXTURE_SCALE_M).ravel().tolist()
         g = spec.geom(name)
         g.material, g.group = ROCK_MATERIAL, GROUP_SHOWN
         g.rgba = [*(rock_albedo(rock, terrain.seed) * np.asarray(ROCK_TINT_RGB)), 1.0]
@@ -295,6 +300,7 @@ class RenderWorld:
 
     def __init__(self, sim: RoverSim, config: RenderConfig, offscreen_px: int = 0) -> None:
         self.sim, self.config = sim, config
+        self.terrain_version = sim.terrain_version  # a streamed terrain's window this model shows
         spec = sim.spec.copy()
         self.tiles = add_terrain_tiles(
             spec, sim.terrain, config.terrain_tile_m, config.max_terrain_tiles, config.terrain_casts_shadows
@@ -314,6 +320,8 @@ class RenderWorld:
         vis.map.shadowclip = config.shadow_half_extent_m / spec.stat.extent
         vis.global_.offwidth = vis.global_.offheight = max(config.native_px, 1024, offscreen_px)  # + lens
         self.model = spec.compile()
+        if sim.streamer is not None:
+            sim.streamer.apply(self.model, sim.terrain)  # true window heights and rock slots (render-only hfield)
         self.data = mujoco.MjData(self.model)
         if self.model.nq != sim.model.nq or self.model.nbody != sim.model.nbody:
             raise RuntimeError("render model layout differs from the physics model (render-only geoms only!)")
@@ -501,6 +509,9 @@ class StereoRenderer:
 
         ``lit=False`` (depth, segmentation): no shadow casters outside the view are needed.
         """
+        if self.world.terrain_version != self.sim.terrain_version:  # streamed terrain: the window moved
+            self.close()
+            self.world = RenderWorld(self.sim, self.config)
         w = self.world
         w.sync()
         cams = [camera_model(w.model, w.data, n, px, px) for n in cam_names]

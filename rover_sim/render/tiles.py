@@ -84,8 +84,9 @@ def _tile_mesh(
     top0, top1, low0, low1 = ring[:-1], ring[1:], low[:-1], low[1:]
     skirt = np.concatenate([np.stack([top0, low0, low1], 1), np.stack([top0, low1, top1], 1)])
     faces += [skirt, skirt[:, ::-1]]  # both windings: the skirt is seen from either side
-    u = (verts[:, 0] + terrain.half_x_m) / (2.0 * terrain.half_x_m)
-    v = (terrain.half_y_m - verts[:, 1]) / (2.0 * terrain.half_y_m)  # first texture row = north (world.py)
+    ox, oy = terrain.origin_xy_m  # a streamed window's centre (0, 0 otherwise)
+    u = (verts[:, 0] - ox + terrain.half_x_m) / (2.0 * terrain.half_x_m)
+    v = (terrain.half_y_m - verts[:, 1] + oy) / (2.0 * terrain.half_y_m)  # first texture row = north (world.py)
     return verts, np.concatenate(faces), norms, np.stack([u, v], axis=-1)
 
 

@@ -16,6 +16,7 @@ from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
 if TYPE_CHECKING:
     from rover_sim.sim.deform import DeformableTerrain
+    from rover_sim.sim.stream import TerrainStreamer
     from terrains import Terrain
 
 SOIL_MODELS = ("bekker", "wong_reece")  # [physics] soil_model: the default law, the experimental opt-in one
@@ -68,7 +69,9 @@ class RoverSim:
     ``soil_law=False`` gives the bare MuJoCo model (frictionless wheels, nothing applied) for speed comparisons.
     ``soil_model`` picks the wheel-soil law: ``"bekker"`` (default, :mod:`rover_sim.sim.terramechanics`) or the
     experimental ``"wong_reece"`` (:mod:`rover_sim.sim.terramechanics_wr`), the only one that supports
-    :meth:`enable_deformation`.
+    :meth:`enable_deformation`. With a ``streamer`` (``[terrain.streamed]``), ``terrain`` is the first window
+    and the heightfield follows the rover (:mod:`rover_sim.sim.stream`); ``texture_fn(window)`` paints each
+    window for the render model (:attr:`spec` is rebuilt for the current window when asked for).
     """
 
     def __init__(
@@ -79,15 +82,20 @@ class RoverSim:
         texture_rgb: np.ndarray | None = None,
         timestep_s: float | None = None,
         soil_model: str = "bekker",
+        streamer: TerrainStreamer | None = None,
+        texture_fn: Callable[[Terrain], np.ndarray] | None = None,
     ) -> None:
         if soil_model not in SOIL_MODELS:
             raise ValueError(f"soil_model must be one of {', '.join(SOIL_MODELS)}, not {soil_model!r}")
         self.terrain = terrain
         self.sun = sun or Sun()
-        self.spec = build_spec(terrain, self.sun, texture_rgb=texture_rgb)
-        if timestep_s is not None:
-            self.spec.option.timestep = timestep_s
-        self.model = self.spec.compile()
+        self.streamer, self._texture_fn, self._timestep_override = streamer, texture_fn, timestep_s
+        self.terrain_version = 0  # counts window changes (the render model rebuilds when it changes)
+        self._spec = self._build_spec(texture_rgb, paint=False)
+        self._spec_version = 0 if streamer is None else -1  # a streamed window is painted when first rendered
+        self.model = self._spec.compile()
+        if streamer is not None:
+            streamer.apply(self.model, terrain)  # the window's true heights (compiling rescales hfield data)
         self.data = mujoco.MjData(self.model)
         self.soil_law_enabled = soil_law
         self.soil_model = soil_model
@@ -127,16 +135,9 @@ class RoverSim:
         self._xfrc = self.data.xfrc_applied
         self._ctrl = self.data.ctrl
         self._xipos = self.data.xipos
-        # terrain lookup for the material under each wheel
-        self._mat_list = np.asarray(terrain.materials, dtype=int).tolist()
-        self._h_list = np.asarray(terrain.heights_m, dtype=float).tolist()
-        self._nrow, self._ncol = np.shape(terrain.heights_m)
-        self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
-        self._inv_cell = 1.0 / terrain.cell_size_m
+        # terrain lookup for the material under each wheel, and the rock geoms
+        self._set_terrain_lookups()
         self.wheel_ref_rad = np.zeros(6)
-        self._rock_index = {
-            m.geom(f"{ROCK_GEOM_PREFIX}{i:04d}").id: i for i in range(len(terrain.rocks))
-        }  # rock geom id -> index into terrain.rocks
         self._wheel_free = np.ones(6)  # 0 for a locked (held, dragged) wheel
         self._substep_hook: Callable[[RoverSim], None] | None = None
         self._substep_every = 1
@@ -144,11 +145,56 @@ class RoverSim:
         self.reset()
 
     # ------------------------------------------------------------------ setup
+    def _build_spec(self, texture_rgb: np.ndarray | None, paint: bool = True) -> mujoco.MjSpec:
+        st = self.streamer
+        if st is not None and paint and texture_rgb is None and self._texture_fn is not None:
+            texture_rgb = self._texture_fn(self.terrain)
+        spec = build_spec(self.terrain, self.sun, texture_rgb=texture_rgb,
+                          rock_slots=None if st is None else st.rock_slots,
+                          elevation_range_m=None if st is None else st.elevation_range_m)  # fmt: skip
+        if self._timestep_override is not None:
+            spec.option.timestep = self._timestep_override
+        return spec
+
+    @property
+    def spec(self) -> mujoco.MjSpec:
+        """The model's spec; for a streamed terrain, of the current window (rebuilt lazily after a move)."""
+        if self._spec_version != self.terrain_version:
+            self._spec, self._spec_version = self._build_spec(None), self.terrain_version
+        return self._spec
+
+    def _set_terrain_lookups(self) -> None:
+        terrain = self.terrain
+        self._mat_list = np.asarray(terrain.materials, dtype=int).tolist()
+        self._h_list = np.asarray(terrain.heights_m, dtype=float).tolist()
+        self._nrow, self._ncol = np.shape(terrain.heights_m)
+        self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
+        self._origin_x, self._origin_y = terrain.origin_xy_m
+        self._inv_cell = 1.0 / terrain.cell_size_m
+        m = self.model
+        self._rock_index = {
+            m.geom(f"{ROCK_GEOM_PREFIX}{i:04d}").id: i for i in range(len(terrain.rocks))
+        }  # rock geom id -> index into terrain.rocks
+
+    def _follow_rover(self) -> None:
+        """Streamed terrain: move the heightfield window when the rover has entered another tile."""
+        x, y = float(self.data.qpos[0]), float(self.data.qpos[1])
+        window = self.streamer.window_for(self.terrain, x, y)
+        if window is None:
+            return
+        self.streamer.apply(self.model, window)
+        self.streamer.recentres += 1
+        self.terrain = window
+        self.terrain_version += 1
+        self._set_terrain_lookups()
+
     def enable_deformation(self) -> DeformableTerrain:
         """Make the heightfield deformable under the wheels (ruts, berms, multipass; see sim/deform.py).
         Experimental; only with ``soil_model="wong_reece"`` (it reads that law's sinkage, axles and presink)."""
         if self.soil_model != "wong_reece":
             raise ValueError(f"deformable terrain needs soil_model 'wong_reece', not {self.soil_model!r}")
+        if self.streamer is not None:
+            raise ValueError("[physics] deformable is not supported with [terrain.streamed] yet; turn one off")
         if self.deform is None:
             from rover_sim.sim.deform import DeformableTerrain
 
@@ -231,6 +277,8 @@ class RoverSim:
                     self._substep_count = 0
                     self._substep_hook(self)
         self._check_divergence()
+        if self.streamer is not None:
+            self._follow_rover()
 
     def step_for(self, duration_s: float, wheel_rate_rad_s: np.ndarray | None = None) -> None:
         n = int(round(duration_s / self.model.opt.timestep))
@@ -280,9 +328,10 @@ class RoverSim:
     def _material_under(self, pos: list[tuple[float, float, float]]) -> list[int]:
         """Material index under each wheel contact; a contact well above the heightfield is on a rock."""
         out = []
+        ox, oy = self._origin_x, self._origin_y
         for x, y, z in pos:
-            j = min(max(int((x + self._half_x) * self._inv_cell + 0.5), 0), self._ncol - 1)
-            i = min(max(int((y + self._half_y) * self._inv_cell + 0.5), 0), self._nrow - 1)
+            j = min(max(int((x - ox + self._half_x) * self._inv_cell + 0.5), 0), self._ncol - 1)
+            i = min(max(int((y - oy + self._half_y) * self._inv_cell + 0.5), 0), self._nrow - 1)
             on_rock = z > self._h_list[i][j] + ROCK_CONTACT_MARGIN_M
             out.append(MATERIAL_ROCK if on_rock else self._mat_list[i][j])
         return out
@@ -295,7 +344,7 @@ class RoverSim:
         t = self.time_s
         c = self.wheel_centres_m()
         hx, hy = self._half_x - margin_m, self._half_y - margin_m
-        if (abs(c[:, 0]) > hx).any() or (abs(c[:, 1]) > hy).any():
+        if (abs(c[:, 0] - self._origin_x) > hx).any() or (abs(c[:, 1] - self._origin_y) > hy).any():
             p = self.position_m()
             return "left_terrain", f"the rover left the terrain at t = {t:.1f} s (at x {p[0]:.2f}, y {p[1]:.2f} m)"
         ground = self.terrain.height_at(c[:, 0], c[:, 1])

@@ -1,0 +1,182 @@
+"""`rover-sim bench traverse`: sol-scale and kilometre drives on streamed terrain (issue #18 acceptance).
+
+Cases: the two sol scenarios of the catalogue (``spirit_plains_sol``, ``opportunity_record_sol``) and the
+benchmark-only 1 km traverse (``benchmarks/traverse_1km.toml``). Each case runs in a fresh ``spawn`` process, so
+its peak RSS (``ru_maxrss``) is its own; the RSS is also read when the true path first passes 100 m and at the end.
+The recording is written (``recording.rrd``) and its size reported. Errors: dead reckoning and VO (final, % of the
+distance; the 10 m KITTI segment error from metrics.json), the autonav outcome and the true distance to the goal.
+
+Bars (issue #18): 1 km -- peak RSS <= 3 GB, RSS at the end within 15 % of RSS after 100 m, recording <= 150 MB,
+real-time factor >= 15; spirit_plains_sol -- goal reached, no contact with a rock >= 25 cm, DR 1-6 %;
+opportunity_record_sol -- >= 200 m in its time budget.
+"""
+
+from __future__ import annotations
+
+import resource
+import time
+from pathlib import Path
+
+from rover_sim.bench import write_json
+from rover_sim.errors import ConfigError
+from rover_sim.resources import data_dir, scenarios_dir
+
+BENCH_DIR = data_dir("benchmarks")
+CASES = {
+    "spirit_plains_sol": scenarios_dir() / "spirit_plains_sol.toml",
+    "opportunity_record_sol": scenarios_dir() / "opportunity_record_sol.toml",
+    "traverse_1km": BENCH_DIR / "traverse_1km.toml",
+}
+RSS_PROBE_M = 100.0
+MAX_PEAK_RSS_MB = 3072.0
+MAX_RSS_GROWTH = 0.15
+MAX_RECORDING_MB = 150.0
+MIN_REALTIME_FACTOR = 15.0
+SPIRIT_DR_PCT = (1.0, 6.0)
+OPPORTUNITY_MIN_M = 200.0
+KM_MIN_M = 990.0
+
+
+def rss_mb() -> float:
+    """Resident set size of this process now (Linux ``/proc/self/status``), MB."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024.0
+    return float("nan")
+
+
+def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
+    """One case in this process (a spawn worker): run, write outputs, measure; the row of the table."""
+    import numpy as np
+
+    from rover_sim.io.recording import RerunRecorder
+    from rover_sim.mission.pipeline import Mission
+    from rover_sim.mission.run import sol_recording, write_outputs
+    from rover_sim.mission.scenario import load_scenario
+
+    sc = load_scenario(CASES[name], list(overrides))
+    out = Path(out_dir) / name
+    out.mkdir(parents=True, exist_ok=True)
+    rec = RerunRecorder(out / "recording.rrd", recording_name=sc.name, **sol_recording(sc))
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    mission = Mission(sc, rec)
+    probe = {"path_m": 0.0, "last": None, "rss_100m_mb": None}
+
+    def on_tick(_obs: object, truth: object) -> None:
+        p = truth.position_xyz_m  # type: ignore[attr-defined]
+        if probe["last"] is not None:
+            probe["path_m"] += float(np.linalg.norm(p[:2] - probe["last"]))
+        probe["last"] = p[:2].copy()
+        if probe["rss_100m_mb"] is None and probe["path_m"] >= RSS_PROBE_M:
+            probe["rss_100m_mb"] = round(rss_mb(), 1)
+
+    mission.tick_listeners.append(on_tick)
+    try:
+        metrics = mission.run()
+    finally:
+        mission.close()
+    write_outputs(mission, metrics, out)
+    rec.close()
+    wall_s, cpu_s = time.perf_counter() - t0, time.process_time() - cpu0
+    onboard_goal = None
+    if mission.evaluator.goal_xy is not None:
+        onboard_goal = float(np.linalg.norm(mission.onboard.pose.position_xyz_m[:2] - mission.evaluator.goal_xy))
+    kitti = metrics.extra.get("kitti_translation_error_pct", {})
+    return {
+        "name": name,
+        "distance_m": round(metrics.distance_m, 2),
+        "wall_s": round(wall_s, 1),
+        "realtime_factor": round(metrics.sim_s / max(wall_s, 1e-9), 1),
+        "cpu_s": round(cpu_s, 1),  # on a shared machine: the real-time factor one free core would give
+        "realtime_factor_cpu": round(metrics.sim_s / max(cpu_s, 1e-9), 1),
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "rss_100m_mb": probe["rss_100m_mb"],
+        "rss_end_mb": round(rss_mb(), 1),
+        "recording_mb": round((out / "recording.rrd").stat().st_size / 1e6, 2),
+        "dr_error_pct": metrics.dr_error_pct,
+        "vo_error_pct": metrics.vo_error_pct,
+        "dr_10m_segment_pct": kitti.get("dead_reckoning", {}).get("10m"),
+        "goal_distance_m": metrics.goal_distance_m,
+        "onboard_goal_distance_m": None if onboard_goal is None else round(onboard_goal, 3),
+        "tall_rock_contacts": metrics.tall_rock_contacts,
+        "body_collisions": metrics.body_collisions,
+        "autonav": metrics.extra.get("autonav"),
+        "sol": metrics.extra.get("sol"),
+        "sim_s": metrics.sim_s,
+        "reason": metrics.reason,
+    }
+
+
+def judge(row: dict) -> tuple[bool, str]:
+    """The issue's bar for this case: (passed, why not)."""
+    name, why = row["name"], []
+    if name == "traverse_1km":
+        if row["distance_m"] < KM_MIN_M:
+            why.append(f"distance {row['distance_m']} m < {KM_MIN_M}")
+        if row["peak_rss_mb"] > MAX_PEAK_RSS_MB:
+            why.append(f"peak RSS {row['peak_rss_mb']} MB > {MAX_PEAK_RSS_MB}")
+        base = row["rss_100m_mb"]
+        if base is None or row["rss_end_mb"] > (1.0 + MAX_RSS_GROWTH) * base:
+            why.append(f"RSS {row['rss_end_mb']} MB at the end vs {base} MB after 100 m (> {MAX_RSS_GROWTH:.0%})")
+        if row["recording_mb"] > MAX_RECORDING_MB:
+            why.append(f"recording {row['recording_mb']} MB > {MAX_RECORDING_MB}")
+        if row["realtime_factor"] < MIN_REALTIME_FACTOR:
+            why.append(f"real-time factor {row['realtime_factor']} < {MIN_REALTIME_FACTOR}")
+    elif name == "spirit_plains_sol":
+        lo, hi = SPIRIT_DR_PCT
+        dr = row["dr_error_pct"]
+        if row["onboard_goal_distance_m"] is None or row["onboard_goal_distance_m"] > 1.0:
+            why.append(f"goal not reached on the onboard pose ({row['onboard_goal_distance_m']} m)")
+        if row["tall_rock_contacts"] > 0:
+            why.append(f"{row['tall_rock_contacts']} ticks touching rocks >= 25 cm")
+        if dr is None or not lo <= dr <= hi:
+            why.append(f"DR error {dr} % outside {lo}-{hi} %")
+    elif name == "opportunity_record_sol" and row["distance_m"] < OPPORTUNITY_MIN_M:
+        why.append(f"distance {row['distance_m']} m < {OPPORTUNITY_MIN_M}")
+    return not why, "; ".join(why)
+
+
+def _run_isolated(name: str, out_dir: str, overrides: tuple[str, ...]) -> dict:
+    """``run_case`` in a fresh spawn process (never fork: the renderer holds a GL context)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from rover_sim.mission.sweep import init_worker
+
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=init_worker) as pool:
+        return pool.submit(run_case, name, out_dir, overrides).result()
+
+
+PUBLIC_KEYS = ("name", "distance_m", "wall_s", "realtime_factor", "peak_rss_mb", "rss_100m_mb", "recording_mb",
+               "dr_error_pct", "vo_error_pct", "goal_distance_m", "passed")  # fmt: skip
+
+
+def bench_traverse(
+    json_path: str | None = None, out_dir: str = "runs/bench_traverse", cases: list[str] | None = None,
+    overrides: tuple[str, ...] = (),
+) -> dict:  # fmt: skip
+    """Run the cases (each in its own process), print the table, write ``{"cases": [...]}`` JSON."""
+    names = cases or list(CASES)
+    unknown = [n for n in names if n not in CASES]
+    if unknown:
+        raise ConfigError("--case", ", ".join(unknown), f"unknown traverse case; choose from {', '.join(CASES)}")
+    rows = []
+    print("| case | distance m | wall s | real-time x | peak RSS MB | RSS@100 m MB | RSS end MB | recording MB | "
+          "DR % | DR 10 m seg % | VO % | goal m (truth / onboard) | passed |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+    for name in names:
+        row = _run_isolated(name, out_dir, overrides)
+        row["passed"], row["why"] = judge(row)
+        rows.append(row)
+        print(f"| {name} | {row['distance_m']:.1f} | {row['wall_s']:.0f} | {row['realtime_factor']:.1f} | "
+              f"{row['peak_rss_mb']:.0f} | {row['rss_100m_mb']} | {row['rss_end_mb']:.0f} | "
+              f"{row['recording_mb']:.1f} | "
+              f"{row['dr_error_pct']} | {row['dr_10m_segment_pct']} | {row['vo_error_pct']} | "
+              f"{row['goal_distance_m']} / {row['onboard_goal_distance_m']} | "
+              f"{'yes' if row['passed'] else 'NO: ' + row['why']} |", flush=True)  # fmt: skip
+    result = {"cases": [{k: r[k] for k in PUBLIC_KEYS} for r in rows]}
+    write_json(json_path, result)
+    if json_path:
+        write_json(str(Path(json_path).with_suffix(".details.json")), {"cases": rows})
+    return result | {"details": rows}
