@@ -54,6 +54,8 @@ The ``ideal`` profile (``model = "ideal"``) keeps today's images byte for byte: 
 from __future__ import annotations
 
 import zlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Literal
 
@@ -157,6 +159,16 @@ class ImageFormation:
         self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), _SEED_TAG, 1]))
         self._exposure = 1.0
         self.last_exposure = 1.0  # relative exposure of the last image (diagnostics)
+
+    @contextmanager
+    def replayed_noise(self) -> Iterator[None]:
+        """Images formed inside draw their noise from a copy of the run's noise stream, which is then restored:
+        an extra image (e.g. a dataset export) leaves the run's later images, and so its metrics, unchanged."""
+        state = self._rng.bit_generator.state
+        try:
+            yield
+        finally:
+            self._rng.bit_generator.state = state
 
     def defects(self, cam_name: str, native_px: int) -> CameraDefects:
         key = (cam_name, native_px)

@@ -143,7 +143,7 @@ def test_flight_profile_fills_lens_errors_and_ideal_has_none() -> None:
     ideal = SensorsSpec(profile="ideal").lens
     assert not ideal.enabled and not ideal.has_mast_error
     with pytest.raises(ValueError, match="sensors.lens.baseline_mm needs sensors.lens.enabled"):
-        SensorsSpec(lens={"baseline_mm": 0.3})
+        SensorsSpec(profile="ideal", lens={"baseline_mm": 0.3})
 
 
 def test_calibration_errors_are_seeded_and_sized() -> None:

@@ -158,11 +158,13 @@ def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_
     from rover_sim.mission.evaluator import Metrics
 
     seen = []
+    gated = missions.BASELINE_PROFILE
+    other = "ideal" if gated == "flight" else "flight"
 
     def fake_run(name, out_dir, record, overrides):
         profile = next(o for o in overrides if o.startswith("sensors.profile=")).split("=")[1].strip('"')
         seen.append(profile)
-        dr = 5.0 if profile == "flight" else 1.0  # far from the stored baseline on flight only
+        dr = 1.0 if profile == gated else 5.0  # far from the stored baseline on the ungated profile only
         return Metrics(name, 0, 3.0, dr, 0.2, 100.0, 4.0, 2.0, True, "all criteria met", 1.0,
                        kitti_segment_error_pct={"vo": {"1m": 1.0}, "dead_reckoning": {"1m": dr}},
                        rms_position_error_m={"vo": 0.01, "dead_reckoning": 0.05})  # fmt: skip
@@ -175,9 +177,9 @@ def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_
     assert seen == ["flight", "ideal"] and ok
     assert [r["profile"] for r in rows] == ["flight", "ideal"] and not any(r["regressions"] for r in rows)
     out = capsys.readouterr().out
-    assert "sensors profile: flight" in out and "sensors profile: ideal (gated against the baseline)" in out
+    assert f"sensors profile: {other}" in out and f"sensors profile: {gated} (gated against the baseline)" in out
     assert "| wopmay | 3.00 | 4.00 | 5.00 | 0.20 | 5.00 / - / - | 1.00 / - / - | 0.050 / 0.010 |" in out
-    assert json.loads(base.read_text())["wopmay"]["dr_error_pct"] == 1.0  # the ideal run was stored, not the flight one
+    assert json.loads(base.read_text())["wopmay"]["dr_error_pct"] == 1.0  # the gated profile's run was stored
     seen.clear()
     missions.bench_suite(None, fast=True, out_root=tmp_path, baseline_path=base, profiles=None)
     assert seen == [missions.BASELINE_PROFILE]

@@ -139,6 +139,8 @@ def small_site_scenario():
             },  # fmt: skip
             "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 35.0},
             "nav": {"vo": False},
+            "sensors": {"profile": "ideal"},  # the survey renders its own pinhole panoramas
+            "appearance": {"regolith": "classic"},  # the survey was built and measured on this soil (README)
             "commands": [{"type": "turn", "angle_deg": 0.0}],
         }
     )

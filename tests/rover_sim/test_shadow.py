@@ -26,6 +26,9 @@ FIELD = {
     },
     "appearance": {"fine_soil": True},
     "commands": [{"type": "drive", "distance_m": 0.1}],
+    # the predictor's geometry against rendered truth: pinhole images in the same frame as the segmentation render
+    # (the flight profile's raw images are not); shadow VO on the flight profile is judged by sol235_shadow
+    "sensors": {"profile": "ideal"},
 }
 SHADOW_DARKENING_GREY = 8  # grey levels: the shadowed ground is ~50 levels darker, noise is off
 

@@ -84,8 +84,12 @@ def make_writer(fmt: str, out: Path) -> DatasetWriter:
 
 
 def render_without_noise(renderer: StereoRenderer, camera: str) -> StereoFrame:
-    """A pair rendered with the image read-noise off, so the run's noise generator is not drawn from."""
+    """A pair rendered without drawing from the run's noise generator: the ideal profile's read noise is off; the
+    flight profile's CCD noise is drawn from a copy of the stream, restored afterwards."""
     config = renderer.config
+    if renderer.imaging is not None:
+        with renderer.imaging.replayed_noise():
+            return renderer.render_pair(camera)
     if config.noise is None:
         return renderer.render_pair(camera)
     renderer.config = dataclasses.replace(config, noise=None)
