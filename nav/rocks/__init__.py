@@ -33,7 +33,8 @@ Then, between sites:
    incremental bundle adjustment), as a weighted least-squares pose graph: unknown site poses (x, y, z, yaw) and
    systematic tie-point error terms, observed as odometry legs between consecutive sites (VO's own covariance, the
    gyro's heading drift) and as site-to-site transforms from the matched rocks (covariance from the fit, scaled by
-   the match residuals), solved every time a site is added.
+   the match residuals; gross tie points screened out first by :func:`robust_tie_points`), solved every time a
+   site is added.
 
 Frames: each site's points and rocks are in that site's *estimated* world frame (x east, y north, z up), i.e. rover
 frame points mapped through the onboard pose estimate at the site; the estimates of two sites differ from the truth
@@ -45,7 +46,7 @@ Modules, in the order of the steps: :mod:`nav.rocks.params` (parameters and data
 (step 4), :mod:`nav.rocks.match` (step 5), :mod:`nav.rocks.chain` (step 6).
 """
 
-from nav.rocks.chain import ChainParams, ChainSite, SiteChain
+from nav.rocks.chain import ChainParams, ChainSite, SiteChain, robust_tie_points
 from nav.rocks.dense import (
     PanoramaStereoParams,
     disparity_tiled,
@@ -111,6 +112,7 @@ __all__ = [
     "observation_quality",
     "panorama_points",
     "refine_disparity",
+    "robust_tie_points",
     "selection_criterion",
     "tie_point_covariances",
     "top_point",

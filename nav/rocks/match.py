@@ -237,7 +237,7 @@ def match_rocks(
         return SiteMatch(np.zeros((0, 2), dtype=int), prior, np.eye(4), math.nan, n_cand)
     cov = ca[pairs[:, 0]] + np.einsum("ij,njk,lk->nil", T.R, cb[pairs[:, 1]], T.R)
     res = pa[pairs[:, 0]] - T.apply(pb[pairs[:, 1]])
-    return SiteMatch(pairs, T, _pose4_covariance(pb[pairs[:, 1]], T, cov), float(np.sqrt(np.mean(res**2))), n_cand)
+    return SiteMatch(pairs, T, pose4_covariance(pb[pairs[:, 1]], T, cov), float(np.sqrt(np.mean(res**2))), n_cand)
 
 
 def _assign(
@@ -270,7 +270,7 @@ def _chance_matches(
     return float(np.mean(counts))
 
 
-def _pose4_covariance(b: np.ndarray, T: Pose4, cov: np.ndarray) -> np.ndarray:
+def pose4_covariance(b: np.ndarray, T: Pose4, cov: np.ndarray) -> np.ndarray:
     """(4, 4) covariance of a weighted least-squares :class:`Pose4` (inverse Gauss-Newton Hessian)."""
     W = np.linalg.inv(cov)
     y = T.yaw_rad
