@@ -150,6 +150,15 @@ def test_bench_stereo_refuses_an_unknown_profile() -> None:
     assert (num_disparities(256), num_disparities(1024)) == (NUM_DISPARITIES, 4 * NUM_DISPARITIES)  # same metres
 
 
+def test_a_matcher_that_returns_nothing_does_not_beat_stereobm() -> None:
+    from rover_sim.bench.stereo import beats_stereobm
+
+    bm = {"stereobm_bad1": 0.0031, "stereobm_density": 0.87}
+    assert beats_stereobm(bm | {"ours_bad1": 0.0014, "ours_density": 0.927})
+    assert not beats_stereobm(bm | {"ours_bad1": 0.0, "ours_density": 0.0})  # no disparity at all
+    assert not beats_stereobm(bm | {"ours_bad1": 0.0040, "ours_density": 0.95})
+
+
 @pytest.mark.render
 def test_flight_pairs_are_rectified_raw_images_with_true_ground_truth() -> None:
     """Flight pair (raw through the true lenses, CCD formation, rectified with the erroneous onboard calibration):
