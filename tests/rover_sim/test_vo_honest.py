@@ -91,19 +91,29 @@ def test_do_nothing_vo_fails_the_shadow_case(stubs, tmp_path):
     assert not r["passed"] and r["vo_accepted"] == 0 and r["vo_refused_reasons"] == {"too_few_features": 8}
 
 
-@pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured: with ideal sensors the inlier threshold is not binding; x10 moves VO error by < 0.04 pp "
-    "(rock_localization 0.065 -> 0.07 %, msstb 0.301 -> 0.333 %, sol235 and wopmay unchanged), inside the gate's "
-    "+25 %/+0.1 pp: issue #17's 'loosened VO trips the gate' does not hold yet",
-)
-def test_loosened_vo_trips_the_regression_gate(tmp_path):
-    """Inlier threshold x 10 (0.75 -> 7.5 px): the committed baseline's gate must flag the run."""
-    from rover_sim.bench.missions import _committed
+# "Inlier threshold x 10" loosens both of the VO's inlier tests: RANSAC's reprojection threshold (step 6,
+# 0.75 -> 7.5 px) and the ML refinement's Mahalanobis outlier gate (step 7, chi^2(3) 16.27 = 4.0 sigma -> 40 sigma,
+# i.e. chi^2 x 100). Loosening only the first is not a loosened VO: the second gate re-removes what RANSAC let in
+# (measured: msstb flight 0.538 -> 0.564 %, not a regression). With both loosened, measured on flight:
+# sol235_shadow 0.434 -> 0.768 % (gate limit 0.542 %), msstb 0.769 -> 0.958 %, wopmay 0.375 -> 0.449 %.
+LOOSENED_VO = ["nav.vo.inlier_threshold_px=7.5", "nav.vo.ml_outlier_chi2=1627"]
 
-    m = run_scenario("rock_localization", tmp_path, record=False, overrides=["nav.vo.inlier_threshold_px=7.5"])
-    assert _regressions(m, _committed()["rock_localization"]), (m.vo_error_pct, m.dr_error_pct)
+
+def test_loosened_vo_trips_the_regression_gate_on_the_shadow_drive(tmp_path):
+    """The shortest gated scenario: the committed baseline's gate flags the loosened VO (the stock VO passing the
+    same gate is the CI's `bench suite --fast`)."""
+    from rover_sim.bench.missions import BASELINE_PROFILE, _committed, profile_overrides
+
+    base = _committed()["sol235_shadow"]
+    loose = run_scenario("sol235_shadow", tmp_path / "loose", record=False,
+                         overrides=LOOSENED_VO + profile_overrides(BASELINE_PROFILE))  # fmt: skip
+    assert any("VO error" in r for r in _regressions(loose, base)), (loose.vo_error_pct, base)
+
+
+@pytest.mark.slow
+def test_loosened_vo_fails_the_fast_suite_gate(tmp_path):
+    rows, ok = bench_suite(None, fast=True, out_root=tmp_path, overrides=LOOSENED_VO)
+    assert not ok and any(r["regressions"] for r in rows), [(r["scenario"], r["vo_error_pct"]) for r in rows]
 
 
 def test_regression_gate_compares_every_stored_metric():
