@@ -67,6 +67,34 @@ def sigterm_raises() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+class Pending:
+    """What :func:`deferred` caught: ``exc`` is the interrupt to raise later (None if no signal came)."""
+
+    exc: KeyboardInterrupt | None = None
+
+
+@contextmanager
+def deferred() -> Iterator[Pending]:
+    """Hold Ctrl-C and SIGTERM for the block (e.g. while an output file is being opened, so an interrupt cannot
+    land between creating the file and the code that finishes it on interrupt); the caller raises ``pending.exc``
+    where it can handle it. Outside the main thread the block runs undeferred."""
+    pending = Pending()
+    if threading.current_thread() is not threading.main_thread():
+        yield pending
+        return
+
+    def hold(signum: int, _frame: object) -> None:
+        if pending.exc is None:
+            pending.exc = Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+
+    previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield pending
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def was_interrupted(reason: str) -> bool:
     """True for the ``metrics.reason`` of a run stopped by Ctrl-C or SIGTERM (in its loop or during setup)."""
     return reason.startswith("run did not complete: " + INTERRUPTED)

@@ -163,23 +163,26 @@ def _run(
     if out_dir is not None:
         out_dir = Path(out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
-    rec: Recorder = (
-        RerunRecorder(
-            out_dir / "recording.rrd",
-            recording_name=sc.name,
-            blueprint=blueprint_for(layout_of(sc)),
-            **sol_recording(sc),
-        )  # fmt: skip
-        if (record and out_dir)
-        else NullRecorder()
-    )
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            desc=sc.name, unit="sim-s", mininterval=1.0, bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]"
+    # the recording file must not exist without the code below that finishes it on an interrupt
+    with interrupts.deferred() as pending:
+        rec: Recorder = (
+            RerunRecorder(
+                out_dir / "recording.rrd",
+                recording_name=sc.name,
+                blueprint=blueprint_for(layout_of(sc)),
+                **sol_recording(sc),
+            )  # fmt: skip
+            if (record and out_dir)
+            else NullRecorder()
         )
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(
+                desc=sc.name, unit="sim-s", mininterval=1.0,
+                bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]",
+            )  # fmt: skip
 
     def on_progress(t_s: float, _msg: str) -> None:
         if bar is not None and t_s - bar.n >= 1.0:
@@ -187,6 +190,8 @@ def _run(
 
     try:
         try:
+            if pending.exc is not None:
+                raise pending.exc
             mission = Mission(sc, rec, on_progress)
         except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM while the world was being built
             metrics = setup_interrupted(sc, e, time.perf_counter() - t0)
