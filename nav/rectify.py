@@ -10,10 +10,17 @@ rover navigation software for planetary exploration"). Here: from the calibrated
   (the nominal camera at the output resolution, so an error-free calibration reproduces the ideal rig), its focal
   length scaled up just enough (:func:`valid_zoom`) that every rectified pixel of both cameras sees inside its raw
   image: no black slivers along the edges where the mounting or calibrated rotation turned the view past the raw
-  image (the ``alpha = 0`` choice of ``cv2.stereoRectify``; 1-3 % at the flight profile's 0.2 deg mounting
+  image (the ``alpha = 0`` choice of ``cv2.stereoRectify``; 1-4 % with the flight profile's mounting and calibration
   errors, none for a pinhole rig already aligned);
 * remap tables (like ``cv2.initUndistortRectifyMap``, but through our models): for each rectified pixel, its ray
   in the rectified frame, rotated into the raw camera, projected by the calibrated model.
+
+Row error budget of a rectified pair (issue #16 bar: <= 0.3 px on matched features; 256^2 navcam, flight
+profile): the calibration's stereo relative rotation dominates (0.02 deg per axis = 0.11 px of row shift, 1 sigma);
+the bilinear resampling (the simulator's render -> raw remap, then this raw -> rectified one) adds a row offset
+of -0.04 to +0.07 px that depends on the maps' sub-pixel phases (exact calibrations of 6 true pairs; bicubic
+rectification halves it; bilinear kept, as in JPL's VICAR ``mpfcahv`` rectification).
+:func:`epipolar_row_error_px` gives the calibration's own row error at any pixel, free of matching and resampling.
 
 Triangulating with the rectified rig *is* triangulating through the models: a rectified pixel stands for exactly
 the ray its table entry's raw pixel has under the calibrated model (same optical centre, rotated only), so matches
