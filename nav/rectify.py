@@ -7,9 +7,20 @@ rover navigation software for planetary exploration"). Here: from the calibrated
 * the rectified rig (:class:`~nav.camera.StereoRig`): both cameras keep their calibrated optical centres and take a
   common orientation whose x axis runs along the calibrated baseline and whose z axis is the mean of the two
   optical axes made orthogonal to it (Fusiello, Trucco & Verri 2000); intrinsics are the given ``target`` pinhole
-  (the nominal camera at the output resolution, so an error-free calibration reproduces the ideal rig);
+  (the nominal camera at the output resolution, so an error-free calibration reproduces the ideal rig), its focal
+  length scaled up just enough (:func:`valid_zoom`) that every rectified pixel of both cameras sees inside its raw
+  image: no black slivers along the edges where the mounting or calibrated rotation turned the view past the raw
+  image (the ``alpha = 0`` choice of ``cv2.stereoRectify``; 1-4 % with the flight profile's mounting and calibration
+  errors, none for a pinhole rig already aligned);
 * remap tables (like ``cv2.initUndistortRectifyMap``, but through our models): for each rectified pixel, its ray
   in the rectified frame, rotated into the raw camera, projected by the calibrated model.
+
+Row error budget of a rectified pair (issue #16 bar: <= 0.3 px on matched features; 256^2 navcam, flight
+profile): the calibration's stereo relative rotation dominates (0.02 deg per axis = 0.11 px of row shift, 1 sigma);
+the bilinear resampling (the simulator's render -> raw remap, then this raw -> rectified one) adds a row offset
+of -0.04 to +0.07 px that depends on the maps' sub-pixel phases (exact calibrations of 6 true pairs; bicubic
+rectification halves it; bilinear kept, as in JPL's VICAR ``mpfcahv`` rectification).
+:func:`epipolar_row_error_px` gives the calibration's own row error at any pixel, free of matching and resampling.
 
 Triangulating with the rectified rig *is* triangulating through the models: a rectified pixel stands for exactly
 the ray its table entry's raw pixel has under the calibrated model (same optical centre, rotated only), so matches
@@ -32,6 +43,8 @@ from nav.camera import PinholeCamera, StereoRig
 from nav.lens import CahvorCamera, CameraModel
 
 CACHE_SIZE = 16  # calibrations kept (pairs x recent pointings)
+MAX_ZOOM = 1.5  # largest focal-length factor valid_zoom may apply (beyond: the models hardly overlap)
+ZOOM_STEPS = 40  # bisection steps of valid_zoom (2^-40 of the search interval)
 
 
 @dataclass(frozen=True)
@@ -84,15 +97,58 @@ def rectifying_rotation(T_rover_left: np.ndarray, T_rover_right: np.ndarray) -> 
     return np.stack([x, np.cross(z, x), z], axis=1)
 
 
+def _edge_rays(target: PinholeCamera, zoom: float) -> np.ndarray:
+    """(N, 3) rays (rectified frame) of the outermost pixel centres of ``target`` with its focal length x ``zoom``."""
+    w, h = target.width_px, target.height_px
+    u = np.concatenate([np.arange(w), np.arange(w), np.zeros(h), np.full(h, w - 1.0)]).astype(float)
+    v = np.concatenate([np.zeros(w), np.full(w, h - 1.0), np.arange(h), np.arange(h)]).astype(float)
+    return np.stack([(u - target.cx_px) / (zoom * target.fx_px), (v - target.cy_px) / (zoom * target.fy_px),
+                     np.ones(u.size)], axis=1)  # fmt: skip
+
+
+def _sees_inside(model: CameraModel, rays_rect: np.ndarray, R_rover_rect: np.ndarray) -> bool:
+    """Whether every ray lands on the raw image of ``model`` within bilinear reach (0 <= u <= width - 1, ...)."""
+    uv = model.project(rays_rect @ (model.T_rover_cam[:3, :3].T @ R_rover_rect).T)
+    eps = 1e-6
+    return bool(np.all(np.isfinite(uv)) and np.all(uv >= -eps) and np.all(uv[:, 0] <= model.width_px - 1 + eps)
+                and np.all(uv[:, 1] <= model.height_px - 1 + eps))  # fmt: skip
+
+
+def valid_zoom(calib: StereoCalibration, R_rover_rect: np.ndarray) -> float:
+    """Smallest factor >= 1 on the target's focal length for which the edge pixels of both rectified cameras (and
+    so, the raw images' outlines being star-shaped about their centres, every pixel) see inside the raw images
+    (``cv2.stereoRectify`` with ``alpha = 0``). Exactly 1 when the target view already fits."""
+
+    def fits(zoom: float) -> bool:
+        rays = _edge_rays(calib.target, zoom)
+        return all(_sees_inside(m, rays, R_rover_rect) for m in (calib.left, calib.right))
+
+    if fits(1.0):
+        return 1.0
+    lo, hi = 1.0, MAX_ZOOM
+    if not fits(hi):
+        raise ValueError(f"rectification: the calibrated {calib.left.name}/{calib.right.name} views overlap too "
+                         f"little for a {calib.target.width_px}x{calib.target.height_px} rectified pair "
+                         f"(needs more than {MAX_ZOOM}x zoom): check the calibration's rotations")  # fmt: skip
+    for _ in range(ZOOM_STEPS):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if fits(mid) else (mid, hi)
+    return hi
+
+
 def rectified_rig(calib: StereoCalibration) -> StereoRig:
     """The rectified pinhole rig of ``calib`` (see the module docstring)."""
     Tl, Tr = calib.left.T_rover_cam, calib.right.T_rover_cam
     R = rectifying_rotation(Tl, Tr)
+    zoom = valid_zoom(calib, R)
+    target = calib.target
+    if zoom != 1.0:
+        target = replace(target, fx_px=target.fx_px * zoom, fy_px=target.fy_px * zoom)
     cams = []
     for model, T in ((calib.left, Tl), (calib.right, Tr)):
         T_rect = np.eye(4)
         T_rect[:3, :3], T_rect[:3, 3] = R, T[:3, 3]
-        cams.append(replace(calib.target, name=model.name, T_rover_cam=T_rect))
+        cams.append(replace(target, name=model.name, T_rover_cam=T_rect))
     return StereoRig(cams[0], cams[1])
 
 
@@ -123,3 +179,34 @@ def rectification(calib: StereoCalibration) -> Rectification:
         _CACHE.pop(next(iter(_CACHE)))
     _CACHE[key] = out
     return out
+
+
+def epipolar_row_error_px(
+    rect: Rectification,
+    calib: StereoCalibration,
+    true_left: CameraModel,
+    true_right: CameraModel,
+    uv_left: np.ndarray,
+    disparity_px: np.ndarray,
+) -> np.ndarray:
+    """Row disparity (right minus left, rectified px) that ``rect`` (built from ``calib``) leaves for the scene
+    points seen at rectified-left pixels ``uv_left`` (Nx2) with ``disparity_px`` (N), when the cameras truly are
+    ``true_left`` / ``true_right``: the ground-truth epipolar error of a calibration, free of matching noise.
+
+    Each point: rectified-left pixel -> raw pixel (the left table, through the calibrated model) -> the true
+    model's ray of that raw pixel, at the depth the disparity gives in the rectified rig -> the true right
+    camera's raw pixel -> the rectified-right pixel the calibrated right model assigns it. Zero for an exact
+    calibration (``calib``'s models equal to the true ones) at any depth.
+    """
+    rig = rect.rig
+    R = rig.left.T_rover_cam[:3, :3]
+    uv = np.atleast_2d(np.asarray(uv_left, dtype=float))
+    rays = np.stack([(uv[:, 0] - rig.left.cx_px) / rig.left.fx_px, (uv[:, 1] - rig.left.cy_px) / rig.left.fy_px,
+                     np.ones(len(uv))], axis=1)  # fmt: skip
+    raw_left = calib.left.project(rays @ (calib.left.T_rover_cam[:3, :3].T @ R).T)
+    d = true_left.unproject(raw_left) @ true_left.T_rover_cam[:3, :3].T  # rover frame
+    depth_m = rig.left.fx_px * rig.baseline_m / np.asarray(disparity_px, dtype=float)  # along the rectified axis
+    p = true_left.T_rover_cam[:3, 3] + (depth_m / (d @ R[:, 2]))[:, None] * d
+    raw_right = true_right.project((p - true_right.T_rover_cam[:3, 3]) @ true_right.T_rover_cam[:3, :3])
+    ray = calib.right.unproject(raw_right) @ (R.T @ calib.right.T_rover_cam[:3, :3]).T
+    return rig.right.fy_px * ray[:, 1] / ray[:, 2] + rig.right.cy_px - uv[:, 1]

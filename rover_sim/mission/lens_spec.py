@@ -27,6 +27,8 @@ render_oversample          1.0            ideal pinhole render's centre magnific
 mount_rotation_deg         0.2            true mounting error of each camera, per axis (build tolerance of a
                                           machined bracket); known to the calibration, so rectification
                                           removes it (row misalignment of 1-3 px at 256^2 without it).
+                                          The rectified view is zoomed 1-4 % so that it holds no pixel
+                                          outside the raw images (``nav.rectify.valid_zoom``).
 camera_rotation_deg        0.05           calibration error of each camera's pointing, per axis, common to both
                                           cameras of a pair (MER navcam/hazcam pointing knowledge ~1 mrad,
                                           Maki 2003 calibration section; 0.05 deg = 0.9 mrad).
@@ -35,6 +37,11 @@ stereo_rotation_deg        0.02           calibration error of the right camera 
                                           (0.82 mrad/px), i.e. 0.1-0.25 mrad of relative pitch; 0.02 deg =
                                           0.35 mrad, the low end of the issue #16 range 0.02-0.05 deg. It moves
                                           rectified rows by 0.11 px (1 sigma) at 256^2, 0.43 px at 1024^2.
+                                          Not a published flight number (none found for the MER pairs'
+                                          epipolar accuracy); it dominates the rectified row error: the
+                                          median row error of a draw (from the true vs calibrated models,
+                                          256^2 navcam) exceeds the issue's 0.3 px bar in 1.4 % of draws
+                                          (1500 draws; 0.3 % at 0.015 deg, none at 0.01 deg).
 baseline_mm                0.3            calibration error of the right camera's position relative to the
                                           left, per axis (issue #16 range 0.2-0.5 mm; 0.15 % of 20 cm).
 focal_length_pct           0.05           relative focal-length error per camera (0.6 px at 1024^2 navcam).

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -9,7 +11,14 @@ from scipy.spatial.transform import Rotation
 
 from nav.camera import PinholeCamera, StereoRig
 from nav.lens import CahvorCamera, FisheyeCamera, pixel_grid
-from nav.rectify import StereoCalibration, rectification, rectified_rig
+from nav.rectify import (
+    StereoCalibration,
+    epipolar_row_error_px,
+    rectification,
+    rectified_rig,
+    rectifying_rotation,
+    valid_zoom,
+)
 
 NAVCAM_R = (0.0, -0.010, 0.003)  # the flight defaults of [sensors.lens]
 HAZCAM_K = (0.01, -0.002, 0.0, 0.0)
@@ -131,6 +140,45 @@ def test_rectification_aligns_rows_of_a_misaligned_pair(name) -> None:
     su, sv = (iu + frac[:, 0]).astype(np.float32)[None], (iv + frac[:, 1]).astype(np.float32)[None]
     local = np.stack([cv2.remap(m, su, sv, cv2.INTER_LINEAR)[0] for m in rect.left_map], 1)
     assert np.abs(local - raw_uv).max() < 0.05
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_rectified_view_holds_no_pixel_outside_the_raw_images(name) -> None:
+    """A pair turned 0.3 deg apart: the rectified focal length is scaled up just enough that every rectified
+    pixel of both cameras samples inside its raw image (no black slivers), and no more (0.1 % less would not)."""
+    make = MODELS[name]
+    left = type(make(256))(**{**vars(make(256)), "name": "x_left", "T_rover_cam": _pose([0.3, -0.2, 0.1], [0, 0, 0])})
+    right = type(make(256))(**{**vars(make(256)), "name": "x_right",
+                               "T_rover_cam": _pose([-0.2, 0.3, -0.3], [0.2, 0.001, -0.002])})  # fmt: skip
+    target = PinholeCamera.from_fov("x", 256, 256, 45.0 if name.startswith("cahvor") else 124.0)
+    calib = StereoCalibration(left, right, target)
+    rect = rectification(calib)
+    zoom = rect.rig.left.fx_px / target.fx_px
+    assert 1.0 < zoom < 1.05 and rect.rig.right.fx_px == rect.rig.left.fx_px
+    for table in (rect.left_map, rect.right_map):
+        assert min(t.min() for t in table) >= -1e-3 and max(t.max() for t in table) <= 255.0 + 1e-3
+    R = rectifying_rotation(left.T_rover_cam, right.T_rover_cam)
+    assert valid_zoom(calib, R) == zoom
+    tighter = StereoCalibration(left, right, replace(target, fx_px=target.fx_px * zoom * 0.999,
+                                                     fy_px=target.fy_px * zoom * 0.999))  # fmt: skip
+    assert valid_zoom(tighter, R) > 1.0  # the edge of the slightly wider view falls outside a raw image
+
+
+def test_epipolar_row_error_is_zero_for_the_true_models_and_the_relative_pitch_otherwise() -> None:
+    """Ground-truth row error of a calibration: 0 when the calibrated models are the true ones; a relative pitch
+    error of the right camera moves every row by about f * angle."""
+    true_l = CahvorCamera.from_pinhole(PinholeCamera.from_fov("n_left", 256, 256, 45.0), r=NAVCAM_R)
+    true_r = replace(true_l, name="n_right", T_rover_cam=_pose([0, 0, 0], [0.2, 0, 0]))
+    uv = np.random.default_rng(4).uniform(20, 236, (50, 2))
+    disparity = np.random.default_rng(5).uniform(5, 40, 50)
+    exact = StereoCalibration(true_l, true_r, true_l.pinhole())
+    assert np.abs(epipolar_row_error_px(rectification(exact), exact, true_l, true_r, uv, disparity)).max() < 1e-9
+    pitch_deg = 0.05
+    wrong_r = replace(true_r, T_rover_cam=true_r.T_rover_cam @ _pose([pitch_deg, 0, 0], [0, 0, 0]))
+    calib = StereoCalibration(true_l, wrong_r, true_l.pinhole())
+    dv = epipolar_row_error_px(rectification(calib), calib, true_l, true_r, uv, disparity)
+    f = rectification(calib).rig.left.fy_px
+    np.testing.assert_allclose(np.median(np.abs(dv)), f * np.radians(pitch_deg), rtol=0.15)
 
 
 def test_error_free_calibration_reproduces_the_ideal_rig() -> None:

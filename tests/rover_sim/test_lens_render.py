@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 import pytest
 
 from nav.camera import transform_points
-from nav.rectify import StereoCalibration, rectification
+from nav.rectify import StereoCalibration, epipolar_row_error_px, rectification
 from rover_sim.mission.calibration import MastEncoders, RunCalibration, build_true_lens, render_rectified
 from rover_sim.mission.lens_spec import FLIGHT_DEFAULTS, LensErrorSpec
 from rover_sim.mission.sensors_spec import SensorsSpec
@@ -99,43 +101,114 @@ def test_marker_in_rectified_image_where_the_rectified_model_puts_it(render_worl
         assert np.linalg.norm(found - expected) < 1.0, f"{cam.name}: marker at {found}, rectified model {expected}"
 
 
-def row_disparity_px(left: np.ndarray, right: np.ndarray) -> np.ndarray:
-    """|v_right - v_left| of corners tracked left -> right (pyramidal LK, forward-backward check < 0.1 px)."""
+def matched_corners(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(uv_left, uv_right) of corners tracked left -> right (pyramidal LK, forward-backward check < 0.1 px)."""
     pts = cv2.goodFeaturesToTrack(left, 800, 0.003, 5, blockSize=7)
     fwd, st1, _ = cv2.calcOpticalFlowPyrLK(left, right, pts, None, winSize=(15, 15), maxLevel=3)
     back, st2, _ = cv2.calcOpticalFlowPyrLK(right, left, fwd, None, winSize=(15, 15), maxLevel=3)
     ok = (st1[:, 0] == 1) & (st2[:, 0] == 1) & (np.linalg.norm((back - pts)[:, 0], axis=1) < 0.1)
-    return np.abs(fwd[ok, 0, 1] - pts[ok, 0, 1])
+    return pts[ok, 0].astype(float), fwd[ok, 0].astype(float)
 
 
-CALIBRATION_SEEDS = range(1, 9)  # fixed before looking at the results; the truth stays the renderer's (seed 3)
+def row_disparity_px(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """|v_right - v_left| of the matched corners."""
+    uv_l, uv_r = matched_corners(left, right)
+    return np.abs(uv_r[:, 1] - uv_l[:, 1])
+
+
+# The 0.31-0.32 px navcam draws of issue #16 were diagnosed on calibration seeds 1-8 (truth: seed 3) and on the
+# exact calibrations of truth seeds 11-15; the bar is asserted on these other draws, fixed before looking at them.
+CALIBRATION_SEEDS = range(101, 109)
+
+
+@dataclass(frozen=True)
+class RowDisparity:
+    """Median |row disparity| (px) of one calibration draw: measured on matched corners, predicted from the true
+    vs calibrated models at the same corners (the ground-truth epipolar error), and their per-corner difference."""
+
+    measured: float
+    predicted: float
+    residual: float
+
+
+def rectified_row_disparity(frame, pins, truth: RunCalibration, calib: RunCalibration) -> RowDisparity:  # noqa: ANN001
+    calib.mount = truth.mount  # the same true cameras, another calibration of them
+    onboard = StereoCalibration(calib.onboard_model(pins[0]), calib.onboard_model(pins[1]), pins[0])
+    rect = rectification(onboard)
+    for table in (rect.left_map, rect.right_map):  # every rectified pixel sees inside its raw image (no black edge)
+        assert min(t.min() for t in table) >= -1e-3 and max(t.max() for t in table) <= 255.0 + 1e-3
+    uv_l, uv_r = matched_corners(*rect.apply(frame.left, frame.right))
+    disparity = uv_l[:, 0] - uv_r[:, 0]
+    keep = disparity > 0.5  # a depth for the prediction
+    assert keep.sum() > 25
+    uv_l, uv_r, disparity = uv_l[keep], uv_r[keep], disparity[keep]
+    dv = uv_r[:, 1] - uv_l[:, 1]
+    truth_l, truth_r = truth.true_model(pins[0]), truth.true_model(pins[1])
+    dv_true = epipolar_row_error_px(rect, onboard, truth_l, truth_r, uv_l, disparity)
+    return RowDisparity(float(np.median(np.abs(dv))), float(np.median(np.abs(dv_true))),
+                        float(np.median(np.abs(dv - dv_true))))  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PairRowDisparities:
+    flight: list[RowDisparity]  # one per CALIBRATION_SEEDS draw
+    exact: RowDisparity
+    raw_px: float  # median |row disparity| of the raw (unrectified) pair
+
+
+_ROW_DISPARITIES: dict[str, PairRowDisparities] = {}
+
+
+def pair_row_disparities(render_world, lens_renderer, pair: str) -> PairRowDisparities:  # noqa: ANN001
+    """The held-out draws' row disparities on one true pair (computed once per pair for the two tests below)."""
+    if pair not in _ROW_DISPARITIES:
+        renderer, truth = lens_renderer
+        sim = render_world.sim
+        frame = renderer.render_pair(pair)
+        pins = [camera_model(sim.model, sim.data, f"{pair}_{s}", 256, 256) for s in ("left", "right")]
+        flight = [rectified_row_disparity(frame, pins, truth, RunCalibration(FLIGHT, s)) for s in CALIBRATION_SEEDS]
+        exact = rectified_row_disparity(frame, pins, truth, RunCalibration(EXACT, SEED))
+        raw = float(np.median(row_disparity_px(frame.left, frame.right)))
+        print(f"{pair}: seeds {list(CALIBRATION_SEEDS)} measured {[round(r.measured, 3) for r in flight]} predicted "
+              f"{[round(r.predicted, 3) for r in flight]} residual {[round(r.residual, 3) for r in flight]}; "
+              f"exact {exact.measured:.3f}, raw {raw:.3f}")  # fmt: skip
+        _ROW_DISPARITIES[pair] = PairRowDisparities(flight, exact, raw)
+    return _ROW_DISPARITIES[pair]
 
 
 @pytest.mark.parametrize("pair", ["hazcam_front", "navcam"])
+def test_rectification_measured_row_disparity_matches_the_models(render_world, lens_renderer, pair) -> None:
+    """Rectified flight pairs (8 held-out calibration draws on one true pair): the row disparity measured on
+    matched corners agrees with the ground truth, the row error the true vs calibrated models predict at the same
+    corners (``epipolar_row_error_px``), to 0.15 px per corner (median: the matcher's own noise, 0.04-0.10 px on
+    the diagnosis draws); an exact calibration gives <= 0.1 px measured and 0 predicted; rectified views hold no
+    pixel outside the raw images; the raw navcam pair is clearly worse."""
+    rows = pair_row_disparities(render_world, lens_renderer, pair)
+    assert rows.exact.measured <= 0.1 and rows.exact.predicted < 1e-6
+    assert max(r.residual for r in rows.flight) <= 0.15
+    if pair == "navcam":  # the hazcams' mounting draw is small
+        assert rows.raw_px > 2.0 * np.median([r.measured for r in rows.flight])
+
+
+NAVCAM_OVER_BAR = (
+    "issue #16 bar not met by the flight calibration budget: held-out draw 104 leaves 0.335 px measured / 0.317 px "
+    "predicted from the models (its stereo relative rotation is 0.047 deg in pitch, 2.3 sigma of 0.02 deg). Over "
+    "1500 draws the predicted median exceeds 0.3 px in 1.4 % of them (0.3 % at 0.015 deg, none at 0.01 deg); "
+    "a smaller stereo_rotation_deg needs a published flight value (lens_spec.py)"
+)
+
+
+@pytest.mark.parametrize(
+    "pair", ["hazcam_front", pytest.param("navcam", marks=pytest.mark.xfail(strict=True, reason=NAVCAM_OVER_BAR))]
+)
 def test_rectified_flight_pairs_have_small_row_disparity(render_world, lens_renderer, pair) -> None:
-    """Flight calibration errors (8 seeded draws) on one true pair: the median row disparity of matched corners
-    after rectification, taken over the draws, is <= 0.3 px and no draw exceeds 0.4 px (at 256^2 the navcam's
-    0.02 deg relative-rotation budget alone moves rows by 0.11 px 1-sigma, so single draws reach 0.3 px); an exact
-    calibration gives <= 0.1 px; the raw navcam pair is clearly worse."""
-    renderer, truth = lens_renderer
-    sim = render_world.sim
-    frame = renderer.render_pair(pair)
-    pins = [camera_model(sim.model, sim.data, f"{pair}_{s}", 256, 256) for s in ("left", "right")]
-
-    def median_dv(calib: RunCalibration) -> float:
-        calib.mount = truth.mount  # the same true cameras, another calibration of them
-        rect = rectification(StereoCalibration(calib.onboard_model(pins[0]), calib.onboard_model(pins[1]), pins[0]))
-        dv = row_disparity_px(*rect.apply(frame.left, frame.right))
-        assert len(dv) > 25
-        return float(np.median(dv))
-
-    flight = np.array([median_dv(RunCalibration(FLIGHT, s)) for s in CALIBRATION_SEEDS])
-    exact = median_dv(RunCalibration(EXACT, SEED))
-    raw = float(np.median(row_disparity_px(frame.left, frame.right)))
-    print(f"{pair}: rectified median |dv| per draw {np.round(flight, 3).tolist()}, exact {exact:.3f}, raw {raw:.3f}")
-    assert exact <= 0.1
-    assert np.median(flight) <= 0.3 and flight.max() <= 0.4
-    assert raw > 2.0 * np.median(flight) if pair == "navcam" else True  # the hazcams' mounting draw is small
+    """Issue #16 bar: every flight calibration draw leaves a median row disparity <= 0.3 px on matched corners of
+    the rectified pair (8 held-out draws, :data:`CALIBRATION_SEEDS`, on one true pair), measured and as predicted
+    from the models. At 256^2 the navcam's 0.02 deg relative-rotation budget moves rows by 0.11 px (1 sigma per
+    axis), so a 2.5-sigma draw reaches the bar."""
+    rows = pair_row_disparities(render_world, lens_renderer, pair)
+    assert max(r.measured for r in rows.flight) <= 0.3
+    assert max(r.predicted for r in rows.flight) <= 0.3
 
 
 def test_flight_profile_fills_lens_errors_and_ideal_has_none() -> None:
