@@ -129,6 +129,7 @@ class RerunRecorder:
         self.segment_points = int(segment_points)
         self.max_points = int(max_points)
         self._rec = rr.RecordingStream(application_id, recording_id=recording_id)
+        self._rec.set_log_time_enabled(False)  # sim_time and step only: no wall-clock timeline (deterministic rows)
         self._rec.save(self.path, default_blueprint=blueprint or default_blueprint())
         if recording_name:
             self._rec.send_recording_name(recording_name)
