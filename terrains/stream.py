@@ -10,7 +10,8 @@ comes back byte-identical whenever it is rebuilt:
 * rocks: Golombek & Rapp (1997) diameters per tile (:func:`terrains.golombek.sample_diameters_m`), placed
   from a generator keyed on ``(seed, tile index)``; only ellipsoidal shapes (a streamed rock is a primitive
   geom whose size can change in place, see ``rover_sim/sim/stream.py``);
-* albedo: :func:`albedo_world`, a function of world coordinates, so a window's texture agrees with the next.
+* albedo: a function of world coordinates, so a window's texture agrees with the next: the multi-scale regolith
+  (:func:`terrains.regolith.albedo_tile`, relief shaded for a given sun) or the classic fBm :func:`albedo_world`.
 
 :class:`StreamedSite` hands out :class:`TerrainTile` objects (cached, LRU) and assembles a
 :class:`WindowTerrain` (a :class:`Terrain` whose grid is centred on ``origin_xy_m`` instead of the world
@@ -29,6 +30,7 @@ import numpy as np
 
 from terrains.golombek import sample_diameters_m
 from terrains.recipe import CraterSpec, StreamSpec, TerrainRecipe
+from terrains.regolith import albedo_tile as regolith_tile
 from terrains.synth import crater_profile_m
 from terrains.terrain import Material, Rock, Terrain
 
@@ -337,27 +339,44 @@ class StreamedSite:
                              0.5 * (ys[0] + ys[-1]), (tx, ty))  # fmt: skip
 
     # -- albedo
-    def albedo_tile(self, tx: int, ty: int, texels_per_cell: int, contrast: float = 1.0) -> np.ndarray:
+    def albedo_tile(
+        self, tx: int, ty: int, texels_per_cell: int, contrast: float = 1.0, *, multiscale: bool = False,
+        sun_direction: np.ndarray | None = None,
+    ) -> np.ndarray:  # fmt: skip
         """Albedo texels of tile ``(tx, ty)``: ``texels_per_cell`` per grid cell a side, texel centres on a world
-        lattice (cell ``g`` holds texels at ``(g + (i + 0.5) / texels_per_cell) * cell``), cached like tiles."""
-        key = ("albedo", tx, ty, texels_per_cell, contrast)
+        lattice (cell ``g`` holds texels at ``(g + (i + 0.5) / texels_per_cell) * cell``), cached like tiles.
+
+        ``multiscale``: the regolith of :func:`terrains.regolith.albedo_tile` (``contrast`` as its ``detail``, its
+        micro-relief shaded for ``sun_direction`` if given) on the same lattice; else the classic fBm."""
+        sun = None if sun_direction is None else tuple(float(v) for v in np.asarray(sun_direction).ravel())
+        key = ("albedo", tx, ty, texels_per_cell, contrast, multiscale, sun)
         if key not in self._albedo:
             m = self.tile_cells * texels_per_cell
             step = self.cell_size_m / texels_per_cell
-            xs, ys = (tx * m + np.arange(m) + 0.5) * step, (ty * m + np.arange(m) + 0.5) * step
-            self._albedo[key] = albedo_world(xs[None, :], ys[:, None], self.seed, contrast)
+            if multiscale:
+                self._albedo[key] = regolith_tile(tx * m * step, ty * m * step, m, m, 1.0 / step, self.seed,
+                                                  detail=contrast, sun_direction=sun_direction)  # fmt: skip
+            else:
+                xs, ys = (tx * m + np.arange(m) + 0.5) * step, (ty * m + np.arange(m) + 0.5) * step
+                self._albedo[key] = albedo_world(xs[None, :], ys[:, None], self.seed, contrast)
             while len(self._albedo) > self._cache_tiles:
                 self._albedo.popitem(last=False)
         self._albedo.move_to_end(key)
         return self._albedo[key]
 
-    def window_albedo(self, window: WindowTerrain, px_per_m: float, contrast: float = 1.0) -> np.ndarray:
-        """A window's texture (row 0 south, column 0 west) from cached tile texels: it spans exactly the window's
-        grid (the last tile's last cell is left out), so every window agrees texel for texel with its neighbours."""
+    def window_albedo(
+        self, window: WindowTerrain, px_per_m: float, contrast: float = 1.0, *, multiscale: bool = False,
+        sun_direction: np.ndarray | None = None,
+    ) -> np.ndarray:  # fmt: skip
+        """A window's texture (row 0 south, column 0 west) from cached tile texels (:meth:`albedo_tile`): it spans
+        exactly the window's grid (the last tile's last cell is left out), so every window agrees texel for texel
+        with its neighbours."""
         ppc = max(1, round(px_per_m * self.cell_size_m))
         k = self.stream.window_tiles
         tx0, ty0 = window.window_index[0] - k // 2, window.window_index[1] - k // 2
-        rows = [np.hstack([self.albedo_tile(tx0 + a, ty0 + b, ppc, contrast) for a in range(k)]) for b in range(k)]
+        kw = {"multiscale": multiscale, "sun_direction": sun_direction}
+        rows = [np.hstack([self.albedo_tile(tx0 + a, ty0 + b, ppc, contrast, **kw) for a in range(k)])
+                for b in range(k)]  # fmt: skip
         return np.vstack(rows)[:-ppc, :-ppc]
 
     # -- windows

@@ -27,10 +27,12 @@ The entity tree mirrors the frame tree (rerun ``nuscenes`` example style)::
 Timelines: ``sim_time`` (a duration, seconds) and ``step`` (a sequence). Every timed call sets both; a call
 without ``step`` reuses the last step seen.
 
-Per-call cost is kept small for long traverses: static data is sent once; camera intrinsics and extrinsics are
-re-sent only when they change; a trajectory is decimated to ``min_spacing_m`` and split into blocks of at most
-``segment_points`` vertices, so each call re-sends only the open block (completed blocks stay visible, latest-at
-semantics), never the whole polyline.
+Per-call cost is kept small for long traverses (issue #18: the recording grows linearly with distance): static
+data is sent once; camera intrinsics and extrinsics are re-sent only when they change; a trajectory is decimated to
+``min_spacing_m`` and split into blocks of at most ``segment_points`` vertices, so each call re-sends only the open
+block (completed blocks stay visible, latest-at semantics), never the whole polyline; the high-rate streams (rover
+pose, scalars, trajectories) are batched into columnar chunks (:mod:`rover_sim.io.columns`), since a chunk per log
+call costs ~1.5 kB of overhead whatever it holds; images are JPEG, depth PNG.
 
 Reading a recording back: :mod:`rover_sim.io.rrd` (:func:`entity_row_counts`).
 """
@@ -41,13 +43,15 @@ import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
 from rover_sim.io.blueprint import default_blueprint
+from rover_sim.io.columns import DEFAULT_FLUSH_ROWS, TIMELINE_SIM_TIME, TIMELINE_STEP, ColumnBuffer
+from rover_sim.io.recorder_protocol import NullRecorder, Recorder  # noqa: F401 - re-exported from here
 from rover_sim.io.recording_helpers import (  # noqa: F401 - TERRAIN_MAX_TRIANGLES re-exported from here
     ROCK_RGBA,
     TERRAIN_MAX_TRIANGLES,
@@ -70,8 +74,6 @@ if TYPE_CHECKING:
     from terrains import Terrain
 
 APPLICATION_ID = "rover-sim"
-TIMELINE_SIM_TIME = "sim_time"
-TIMELINE_STEP = "step"
 
 POINTS_MAX = 50_000  # larger point clouds are subsampled (evenly, deterministic) before logging
 CAMERA_PLANE_DISTANCE_M = 0.25  # how far in front of the camera the viewer draws the image plane / frustum
@@ -87,178 +89,18 @@ _OUTLIER_RGBA = (255, 50, 40, 255)
 _DRAPE_OFFSET_M = 0.03  # lines and points drawn on the ground sit this far above it so they are not z-fought
 
 
-# ------------------------------------------------------------------------------------------------- protocol
-
-
-@runtime_checkable
-class Recorder(Protocol):
-    """What the runner logs. ``RerunRecorder`` writes an ``.rrd``; ``NullRecorder`` does nothing.
-
-    ``wants_images()`` tells the runner whether extra, recording-only products (dense stereo of the VO pairs) are
-    worth computing.
-    """
-
-    def wants_images(self) -> bool: ...
-
-    def log_terrain(self, terrain: Terrain) -> None: ...
-
-    def log_terrain_tile(self, key: str, terrain: Terrain) -> None: ...
-
-    def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None: ...
-
-    def log_camera(self, name: str, rig: StereoRig, t_s: float | None = None) -> None: ...
-
-    def log_stereo_images(
-        self,
-        name: str,
-        t_s: float,
-        step: int | None,
-        left_u8: np.ndarray,
-        right_u8: np.ndarray,
-        disparity_px: np.ndarray | None = None,
-    ) -> None: ...
-
-    def log_points(
-        self, name: str, t_s: float, step: int | None, points_world: np.ndarray, colors: np.ndarray | None = None
-    ) -> None: ...
-
-    def log_trajectory(self, name: str, t_s: float, step: int | None, positions_m: np.ndarray) -> None: ...
-
-    def log_goodness(
-        self,
-        t_s: float,
-        step: int | None,
-        centers_xy: np.ndarray,
-        z: np.ndarray,
-        goodness: np.ndarray,
-        cell_size_m: float,
-    ) -> None: ...
-
-    def log_arcs(
-        self,
-        t_s: float,
-        step: int | None,
-        polylines: Sequence[np.ndarray],
-        votes: Sequence[float | None],
-        chosen: int | None,
-    ) -> None: ...
-
-    def log_vo_features(
-        self,
-        name: str,
-        t_s: float,
-        step: int | None,
-        uv_prev: np.ndarray,
-        uv_cur: np.ndarray,
-        inlier: np.ndarray,
-    ) -> None: ...
-
-    def log_keep_out(self, name: str, x_m: float, y_m: float, radius_m: float, z_m: float) -> None: ...
-
-    def log_scalars(self, t_s: float, step: int | None, values: Mapping[str, float]) -> None: ...
-
-    def log_event(self, t_s: float, step: int | None, text: str, level: str = "INFO") -> None: ...
-
-    def close(self) -> None: ...
-
-
-class NullRecorder:
-    """A recorder that records nothing (kiss-icp ``StubVisualizer``): run without ``if record:`` branches."""
-
-    def wants_images(self) -> bool:
-        return False
-
-    def log_terrain(self, terrain: Terrain) -> None:
-        pass
-
-    def log_terrain_tile(self, key: str, terrain: Terrain) -> None:
-        pass
-
-    def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None:
-        pass
-
-    def log_camera(self, name: str, rig: StereoRig, t_s: float | None = None) -> None:
-        pass
-
-    def log_stereo_images(
-        self,
-        name: str,
-        t_s: float,
-        step: int | None,
-        left_u8: np.ndarray,
-        right_u8: np.ndarray,
-        disparity_px: np.ndarray | None = None,
-    ) -> None:
-        pass
-
-    def log_points(
-        self, name: str, t_s: float, step: int | None, points_world: np.ndarray, colors: np.ndarray | None = None
-    ) -> None:
-        pass
-
-    def log_trajectory(self, name: str, t_s: float, step: int | None, positions_m: np.ndarray) -> None:
-        pass
-
-    def log_goodness(
-        self,
-        t_s: float,
-        step: int | None,
-        centers_xy: np.ndarray,
-        z: np.ndarray,
-        goodness: np.ndarray,
-        cell_size_m: float,
-    ) -> None:
-        pass
-
-    def log_arcs(
-        self,
-        t_s: float,
-        step: int | None,
-        polylines: Sequence[np.ndarray],
-        votes: Sequence[float | None],
-        chosen: int | None,
-    ) -> None:
-        pass
-
-    def log_vo_features(
-        self,
-        name: str,
-        t_s: float,
-        step: int | None,
-        uv_prev: np.ndarray,
-        uv_cur: np.ndarray,
-        inlier: np.ndarray,
-    ) -> None:
-        pass
-
-    def log_keep_out(self, name: str, x_m: float, y_m: float, radius_m: float, z_m: float) -> None:
-        pass
-
-    def log_scalars(self, t_s: float, step: int | None, values: Mapping[str, float]) -> None:
-        pass
-
-    def log_event(self, t_s: float, step: int | None, text: str, level: str = "INFO") -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-    def __enter__(self) -> NullRecorder:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-
 # ------------------------------------------------------------------------------------------------- recorder
 
 
 class RerunRecorder:
     """Writes a traverse to an ``.rrd`` file through its own ``rr.RecordingStream`` (not the global one).
 
-    ``jpeg_quality`` compresses camera images (``None``: raw pixels, about 10x larger). ``min_spacing_m`` and
-    ``segment_points`` bound the trajectory cost (module docstring). Call :meth:`close` (or use ``with``) so
-    the file gets its footer; a file cut short without one is still readable with ``RrdReader(...).stream()``.
+    ``jpeg_quality`` compresses camera images (``None``: raw pixels, about 10x larger; otherwise depth images are
+    PNG-compressed too, losslessly). ``min_spacing_m`` and ``segment_points`` bound the trajectory cost (module
+    docstring). Poses, scalars and trajectories are sent in columns of ``flush_rows`` rows
+    (:mod:`rover_sim.io.columns`). Call :meth:`close` (or use ``with``) so the buffered rows are sent and the file
+    gets its footer; a file cut short without one is still readable with ``RrdReader(...).stream()`` (without the
+    rows still buffered when the process died).
     """
 
     def wants_images(self) -> bool:
@@ -276,6 +118,7 @@ class RerunRecorder:
         segment_points: int = 256,
         max_points: int = POINTS_MAX,
         blueprint: rrb.Blueprint | None = None,
+        flush_rows: int = DEFAULT_FLUSH_ROWS,
     ) -> None:
         if segment_points < 2:
             raise ValueError(f"segment_points must be >= 2, got {segment_points}")
@@ -286,9 +129,11 @@ class RerunRecorder:
         self.segment_points = int(segment_points)
         self.max_points = int(max_points)
         self._rec = rr.RecordingStream(application_id, recording_id=recording_id)
+        self._rec.set_log_time_enabled(False)  # sim_time and step only: no wall-clock timeline (deterministic rows)
         self._rec.save(self.path, default_blueprint=blueprint or default_blueprint())
         if recording_name:
             self._rec.send_recording_name(recording_name)
+        self._columns = ColumnBuffer(self._rec, flush_rows)
         self._closed = False
         self._t_s = 0.0
         self._step = 0
@@ -306,6 +151,12 @@ class RerunRecorder:
         if self._closed:
             raise RuntimeError(f"RerunRecorder({self.path}) is closed; create a new recorder to log {path!r}")
         self._rec.log(path, *archetypes, static=static)  # type: ignore[arg-type]
+
+    def _add(self, path: str, kind: str, row: tuple) -> None:
+        """A row of a batched stream (:mod:`rover_sim.io.columns`) at the current time (set by ``_time``)."""
+        if self._closed:
+            raise RuntimeError(f"RerunRecorder({self.path}) is closed; create a new recorder to log {path!r}")
+        self._columns.add(path, kind, self._t_s, self._step, row)
 
     def _time(self, t_s: float | None, step: int | None) -> None:
         if t_s is not None:
@@ -404,7 +255,8 @@ class RerunRecorder:
                 raise ValueError(f"log_stereo_images({name!r}) got a disparity map before log_camera({name!r}, rig)")
             depth_mm = np.rint(1000.0 * rig.depth_from_disparity(disparity_px))
             depth_mm[~(depth_mm < 65535.0)] = 0.0  # 0 = no data (NaN, or beyond the 65.5 m a uint16 holds)
-            self._log(f"world/rover/{name}/left/depth", rr.DepthImage(depth_mm.astype(np.uint16), meter=1000.0))
+            depth = rr.DepthImage(depth_mm.astype(np.uint16), meter=1000.0)
+            self._log(f"world/rover/{name}/left/depth", depth if self.jpeg_quality is None else depth.compress())
 
     def _image(self, img: np.ndarray) -> rr.Image | rr.EncodedImage:
         a = np.asarray(img)
@@ -440,12 +292,9 @@ class RerunRecorder:
     # -- world -----------------------------------------------------------------------------------------------
 
     def log_rover_pose(self, t_s: float, step: int | None, position_m: np.ndarray, quat_wxyz: np.ndarray) -> None:
-        """world <- rover transform (translation + quaternion)."""
+        """world <- rover transform (translation + quaternion), batched (sent every ``flush_rows`` poses)."""
         self._time(t_s, step)
-        self._log(
-            "world/rover",
-            rr.Transform3D(translation=np.asarray(position_m, dtype=np.float64), quaternion=xyzw(quat_wxyz)),
-        )
+        self._add("world/rover", "pose", (np.asarray(position_m, dtype=np.float64), xyzw(quat_wxyz)))
 
     def log_points(
         self, name: str, t_s: float, step: int | None, points_world: np.ndarray, colors: np.ndarray | None = None
@@ -473,6 +322,7 @@ class RerunRecorder:
         )
         if st is None or rewritten:
             if st is not None:  # history was rewritten: start over
+                self._columns.flush_entity(f"{base}/path/{st.block:05d}")
                 self._log(f"{base}/path", rr.Clear(recursive=True))
             st = self._tracks[name] = PolylineState()
         rgb = colour_of(name)
@@ -486,18 +336,19 @@ class RerunRecorder:
             st.kept.append(q)
             changed = True
             if len(st.kept) >= self.segment_points:  # close this block, open the next at its last vertex
-                self._log(f"{base}/path/{st.block:05d}", rr.LineStrips3D([np.asarray(st.kept)], colors=[rgb]))
+                self._add(f"{base}/path/{st.block:05d}", "strip", (np.asarray(st.kept), rgb))
+                self._columns.flush_entity(f"{base}/path/{st.block:05d}")
                 st.block += 1
                 st.kept = [q]
                 changed = False
         st.n_in, st.last_in = len(p), p[-1].copy()
         if changed and len(st.kept) >= 2:
-            self._log(f"{base}/path/{st.block:05d}", rr.LineStrips3D([np.asarray(st.kept)], colors=[rgb]))
+            self._add(f"{base}/path/{st.block:05d}", "strip", (np.asarray(st.kept), rgb))
         current = st.kept[-1] if st.kept else None
         if np.isfinite(p[-1]).all():
             current = p[-1]
         if current is not None:
-            self._log(f"{base}/current", rr.Points3D([current], colors=[rgb], radii=[0.05], labels=[name]))
+            self._add(f"{base}/current", "point", (current, rgb, 0.05, name))
 
     def log_goodness(
         self,
@@ -554,12 +405,12 @@ class RerunRecorder:
     # -- plots and events ------------------------------------------------------------------------------------
 
     def log_scalars(self, t_s: float, step: int | None, values: Mapping[str, float]) -> None:
-        """One ``Scalars`` per key at ``plots/<key>`` (``/`` in a key nests); non-finite values are skipped."""
+        """One ``Scalars`` per key at ``plots/<key>`` (``/`` in a key nests), batched; non-finite values skipped."""
         self._time(t_s, step)
         for key, value in values.items():
             x = float(value)
             if math.isfinite(x):
-                self._log(f"plots/{key}", rr.Scalars(x))
+                self._add(f"plots/{key}", "scalar", (x,))
 
     def log_event(self, t_s: float, step: int | None, text: str, level: str = "INFO") -> None:
         """A line in the ``events`` log; ``level`` is one of :data:`LEVELS` (``WARNING`` = ``WARN``)."""
@@ -578,6 +429,7 @@ class RerunRecorder:
             return
         self._closed = True
         try:
+            self._columns.flush()
             self._rec.flush()
         finally:
             self._rec.disconnect()

@@ -12,7 +12,6 @@ Mast convention (one everywhere): ``pan_deg`` left positive, ``elevation_deg`` u
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from types import MappingProxyType
 
 import numpy as np
@@ -37,9 +36,22 @@ RELIEF_REBAKE_DEG = 3.0  # re-shade the soil's micro-relief when the sun has mov
 SETTLE_S = 1.0  # the rover settles on the terrain before the run starts
 
 
-def _window_painter(streamer: TerrainStreamer, px_per_m: float, contrast: float) -> Callable[[Terrain], np.ndarray]:
-    """Texture of a streamed window from world-coordinate albedo, per tile (``StreamedSite.window_albedo``)."""
-    return lambda window: texture_rgb_u8(streamer.site.window_albedo(window, px_per_m, contrast))
+class WindowPainter:
+    """Texture of a streamed window, per tile (``StreamedSite.window_albedo``): the multiscale regolith (as a whole
+    site's, ``fine_soil`` and patches aside) with its relief shaded for :attr:`sun_direction`, or the classic
+    albedo. :meth:`World.move_sun` updates the sun; windows painted from then on (each re-centre) use it."""
+
+    def __init__(self, streamer: TerrainStreamer, px_per_m: float, contrast: float, multiscale: bool,
+                 sun_direction: np.ndarray) -> None:  # fmt: skip
+        self.streamer, self.px_per_m, self.contrast, self.multiscale = streamer, px_per_m, contrast, multiscale
+        self.sun_direction = sun_direction
+
+    def __call__(self, window: Terrain) -> np.ndarray:
+        sun = self.sun_direction if self.multiscale else None
+        albedo = self.streamer.site.window_albedo(
+            window, self.px_per_m, self.contrast, multiscale=self.multiscale, sun_direction=sun  # type: ignore[arg-type]
+        )
+        return texture_rgb_u8(albedo)
 
 
 def texture_px_per_m(terrain: Terrain, wanted_px_per_m: float) -> float:
@@ -85,11 +97,12 @@ class World:
         self.clock = MissionClock(start_h) if start_h is not None else None
         sun_az_deg, sun_el_deg = scenario.sun.azimuth_elevation_at(lst)
         self._baked_sun = Sun(sun_az_deg, sun_el_deg).direction()  # the sun the soil's micro-relief is shaded for
-        self.streamer, texture, texture_fn = None, None, None
+        self.streamer, texture, self._painter = None, None, None
         if scenario.terrain.streamed is not None:  # large sites: a window of tiles follows the rover
             self.streamer = TerrainStreamer(scenario.terrain, scenario.seed)
             terrain = self.streamer.initial_window(scenario.start.x_m, scenario.start.y_m)
-            texture_fn = _window_painter(self.streamer, texture_px_per_m(terrain, ap.texture_px_per_m), ap.contrast)
+            self._painter = WindowPainter(self.streamer, texture_px_per_m(terrain, ap.texture_px_per_m), ap.contrast,
+                                          ap.regolith == "multiscale", self._baked_sun)  # fmt: skip
         else:
             terrain = synthesize(scenario.terrain, scenario.seed)
             texture = ground_texture(scenario, terrain, self._baked_sun)
@@ -100,7 +113,7 @@ class World:
             timestep_s=scenario.physics.timestep_s,
             soil_model=scenario.physics.soil_model,
             streamer=self.streamer,
-            texture_fn=texture_fn,
+            texture_fn=self._painter,
         )
         if scenario.physics.deformable:  # experimental, wong_reece only: ruts, berms, multipass (sim/deform.py)
             self.sim.enable_deformation()
@@ -215,10 +228,12 @@ class World:
         self.sun_direction_world = Sun(az, el).direction()
         self.renderer.set_sun(self.sun_direction_world)
         moved_deg = math.degrees(math.acos(min(1.0, float(self._baked_sun @ self.sun_direction_world))))
-        streamed = self.streamer is not None  # streamed windows are painted per tile (classic albedo)
-        if self.scenario.appearance.regolith == "multiscale" and moved_deg > RELIEF_REBAKE_DEG and not streamed:
+        if self.scenario.appearance.regolith == "multiscale" and moved_deg > RELIEF_REBAKE_DEG:
             self._baked_sun = self.sun_direction_world
-            self.renderer.set_ground_texture(ground_texture(self.scenario, self.terrain, self._baked_sun))
+            if self._painter is not None:  # streamed: the next windows (a re-centre per tile) are shaded anew
+                self._painter.sun_direction = self._baked_sun
+            else:
+                self.renderer.set_ground_texture(ground_texture(self.scenario, self.terrain, self._baked_sun))
 
     def clock_summary(self) -> dict | None:
         """The mission clock for metrics.json (None without one); driving charged up to now."""

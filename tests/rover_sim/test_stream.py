@@ -91,13 +91,37 @@ def test_streamed_deformation_is_refused() -> None:
         sim.enable_deformation()
 
 
-def test_window_textures_agree_texel_for_texel() -> None:
+SUN = np.array([0.4, -0.3, -0.87])  # the way sunlight travels (site frame)
+
+
+@pytest.mark.parametrize("multiscale", [False, True], ids=["classic", "multiscale"])
+def test_window_textures_agree_texel_for_texel(multiscale: bool) -> None:
     site = StreamedSite(_recipe(), seed=3)
     a, b = site.window((0, 0)), site.window((1, 0))
-    ta, tb = site.window_albedo(a, 40.0), site.window_albedo(b, 40.0)
+    kw = {"multiscale": multiscale, "sun_direction": SUN}
+    ta, tb = site.window_albedo(a, 40.0, **kw), site.window_albedo(b, 40.0, **kw)
     assert ta.shape == (round(2 * a.half_y_m * 40), round(2 * a.half_x_m * 40))
     shift = site.tile_cells * 2  # one tile of texels at 2 texels per 5 cm cell
     np.testing.assert_array_equal(ta[:, shift:], tb[:, : ta.shape[1] - shift])
+
+
+def test_multiscale_tiles_are_the_site_regolith_and_come_back_identical() -> None:
+    """The streamed regolith is ``terrains.albedo_tile`` on the tiles' texel lattice: two tiles side by side equal
+    one regolith tile spanning both (no seam, up to float rounding), and a tile evicted and rebuilt is
+    byte-identical; a moved sun re-shades it."""
+    from terrains import albedo_tile
+
+    site = StreamedSite(_recipe(), seed=3, cache_tiles=1)
+    first = site.albedo_tile(1, -2, 2, multiscale=True, sun_direction=SUN).copy()
+    east = site.albedo_tile(2, -2, 2, multiscale=True, sun_direction=SUN)  # evicts the first (cache of 1)
+    m = site.tile_cells * 2
+    both = albedo_tile(TILE_M, -2 * TILE_M, 2 * m, m, 40.0, 3, sun_direction=SUN)
+    np.testing.assert_allclose(np.hstack([first, east]), both, rtol=0, atol=1e-5)
+    again = site.albedo_tile(1, -2, 2, multiscale=True, sun_direction=SUN)
+    assert again.tobytes() == first.tobytes()
+    lower_sun = site.albedo_tile(1, -2, 2, multiscale=True, sun_direction=np.array([0.9, 0.0, -0.44]))
+    assert not np.allclose(lower_sun, first, atol=1e-3)
+    assert not np.allclose(site.albedo_tile(1, -2, 2), first, atol=1e-2)  # the classic albedo differs
 
 
 def test_tiles_are_logged_once_and_compactly(tmp_path) -> None:
