@@ -216,12 +216,10 @@ class _Pipeline:
         ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
         scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
         lo, hi = self.lo[rows], self.hi[rows]
-        np.copyto(lo, window.lo[rows, None])
-        np.copyto(hi, window.hi[rows, None])
-        cv2.compare(index, lo, cv2.CMP_GT, dst=ok)
-        cv2.bitwise_and(ok, cv2.compare(index, hi, cv2.CMP_LT, dst=tmp), dst=ok)
-        cv2.bitwise_and(ok, cv2.compare(curvature, 0.0, cv2.CMP_GT, dst=tmp), dst=ok)
-        cv2.bitwise_and(ok, cv2.compare(curvature, _CURVATURE_LIMIT, cv2.CMP_LT, dst=tmp), dst=ok)
+        np.copyto(lo, (window.lo[rows] + 1)[:, None])  # indices and curvatures are integers: lo + 1 <= index <= hi - 1
+        np.copyto(hi, (window.hi[rows] - 1)[:, None])
+        cv2.inRange(index, lo, hi, dst=ok)
+        cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
         hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side
         t0, t1 = max(v0 - hw, 0), min(v1 + hw, h_px)
         texture = texture_into(
@@ -241,7 +239,7 @@ class _Pipeline:
             cv2.add(out, float(params.min_disparity), dst=out)
         cv2.bitwise_not(ok, dst=bad)
         if params.discontinuity_px > 0 or params.speckle_window_size > 0:
-            fixed = cv2.multiply(out, 16.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
+            fixed = cv2.addWeighted(out, 16.0, out, 0.0, 0.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
         if params.discontinuity_px > 0:
             keep = discontinuity(fixed, bad, params.discontinuity_px, hw, tmp, tmp2, self.fixed2[rows])
             cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
