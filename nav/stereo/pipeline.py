@@ -185,11 +185,12 @@ class _Pipeline:
         found = (cum[self.vote_hi] - cum[self.vote_lo]) >= _COARSE_MIN_VOTES  # (H, bins): disparities near each row
         found[:, 0] = False
         d_max = params.num_disparities - 1
-        lo = np.argmax(found, axis=1) - (1 + params.row_window_margin_px)  # bin b holds index b - 1
+        first = np.argmax(found, axis=1)  # 0 where nothing matched near the row (bin 0 is never found)
+        lo = first - (1 + params.row_window_margin_px)  # bin b holds index b - 1
         hi = (n_bins - 2 + params.row_window_margin_px) - np.argmax(found[:, ::-1], axis=1)
         np.maximum(lo, 0, out=lo)
         np.minimum(hi, d_max, out=hi)
-        hi[~found.any(axis=1)] = -1  # nothing matched near this row: not searched
+        hi[first == 0] = -1  # nothing matched near this row: not searched
         return RowWindow(np.minimum(lo, d_max).astype(np.int32), hi.astype(np.int32))
 
     def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
