@@ -40,7 +40,7 @@ def match_quality_mask(search: SadSearch, bp_left: np.ndarray, params: StereoPar
 def sad_limit(mean_sq: np.ndarray, params: StereoParams, gain: float, out: np.ndarray) -> np.ndarray:
     """max_sad_ratio * window area * local RMS of the band-passed image in quantised levels."""
     cv2.sqrt(mean_sq, dst=out)
-    return cv2.multiply(out, params.max_sad_ratio * params.window_px**2 * gain, dst=out)
+    return cv2.addWeighted(out, params.max_sad_ratio * params.window_px**2 * gain, out, 0.0, 0.0, dst=out)
 
 
 def uniqueness_mask(search: SadSearch, params: StereoParams = StereoParams()) -> np.ndarray:

@@ -185,11 +185,12 @@ class _Pipeline:
         found = (cum[self.vote_hi] - cum[self.vote_lo]) >= _COARSE_MIN_VOTES  # (H, bins): disparities near each row
         found[:, 0] = False
         d_max = params.num_disparities - 1
-        lo = np.argmax(found, axis=1) - (1 + params.row_window_margin_px)  # bin b holds index b - 1
+        first = np.argmax(found, axis=1)  # 0 where nothing matched near the row (bin 0 is never found)
+        lo = first - (1 + params.row_window_margin_px)  # bin b holds index b - 1
         hi = (n_bins - 2 + params.row_window_margin_px) - np.argmax(found[:, ::-1], axis=1)
         np.maximum(lo, 0, out=lo)
         np.minimum(hi, d_max, out=hi)
-        hi[~found.any(axis=1)] = -1  # nothing matched near this row: not searched
+        hi[first == 0] = -1  # nothing matched near this row: not searched
         return RowWindow(np.minimum(lo, d_max).astype(np.int32), hi.astype(np.int32))
 
     def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
@@ -216,12 +217,10 @@ class _Pipeline:
         ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
         scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
         lo, hi = self.lo[rows], self.hi[rows]
-        np.copyto(lo, window.lo[rows, None])
-        np.copyto(hi, window.hi[rows, None])
-        cv2.compare(index, lo, cv2.CMP_GT, dst=ok)
-        cv2.bitwise_and(ok, cv2.compare(index, hi, cv2.CMP_LT, dst=tmp), dst=ok)
-        cv2.bitwise_and(ok, cv2.compare(curvature, 0.0, cv2.CMP_GT, dst=tmp), dst=ok)
-        cv2.bitwise_and(ok, cv2.compare(curvature, _CURVATURE_LIMIT, cv2.CMP_LT, dst=tmp), dst=ok)
+        np.copyto(lo, (window.lo[rows] + 1)[:, None])  # indices and curvatures are integers: lo + 1 <= index <= hi - 1
+        np.copyto(hi, (window.hi[rows] - 1)[:, None])
+        cv2.inRange(index, lo, hi, dst=ok)
+        cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
         hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side
         t0, t1 = max(v0 - hw, 0), min(v1 + hw, h_px)
         texture = texture_into(
@@ -241,7 +240,7 @@ class _Pipeline:
             cv2.add(out, float(params.min_disparity), dst=out)
         cv2.bitwise_not(ok, dst=bad)
         if params.discontinuity_px > 0 or params.speckle_window_size > 0:
-            fixed = cv2.multiply(out, 16.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
+            fixed = cv2.addWeighted(out, 16.0, out, 0.0, 0.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
         if params.discontinuity_px > 0:
             keep = discontinuity(fixed, bad, params.discontinuity_px, hw, tmp, tmp2, self.fixed2[rows])
             cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)

@@ -83,6 +83,8 @@ class Engine:
         self.band = np.empty((h_px, w_px + hw + 1), depth)
         self.window = RowWindow.full(h_px, num_disparities)
         self.u_grid, self.v_grid = grids(shape)
+        if not self.rolling and h_px * num_disparities < 32000:  # (scores: rows of index -+ 1 in costs)
+            self.v_minus, self.v_plus = self.v_grid - h_px, self.v_grid + h_px
         f32, u8 = (lambda: np.empty(shape, np.float32)), (lambda: np.empty(shape, np.uint8))
         self.best_all, self.cost, self.index, self.right_index = f32(), f32(), f32(), f32()
         self.rows, self.key_minus, self.key_plus, self.cost_minus, self.cost_plus = f32(), f32(), f32(), f32(), f32()
@@ -221,10 +223,11 @@ class Engine:
         best01 = cv2.min(self.best[0, rows], self.best[1, rows], dst=self.best01[rows])
         best = cv2.min(best01, self.best[2, rows], dst=self.best_all[rows])
         cost = np.floor(best, out=self.cost[rows])
-        index = cv2.multiply(cv2.subtract(best, cost, dst=self.index[rows]), float(TAG), dst=self.index[rows])
+        # (key - SAD) * TAG: both products are exact, so is their difference (an integer < 2^24)
+        index = cv2.addWeighted(best, float(TAG), cost, -float(TAG), 0.0, dst=self.index[rows])
         best_right = self.best_right[rows]
         right = np.floor(best_right, out=self.right_index[rows])
-        right = cv2.multiply(cv2.subtract(best_right, right, dst=right), float(TAG), dst=right)
+        right = cv2.addWeighted(best_right, float(TAG), right, -float(TAG), 0.0, dst=right)
         none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, dst=self.mask_tmp[rows])
         cv2.subtract(right, 1.0, dst=right, mask=none)
         return index, right
@@ -243,24 +246,23 @@ class Engine:
         n = self.num_disparities
         sl = self.rows_decoded
         key_minus, key_plus, far_tmp, stack_row = self.key_minus[sl], self.key_plus[sl], self.far_tmp[sl], self.rows[sl]
-        # row of (index, v) in costs as (D * H, W)
-        rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], dst=stack_row)
         if self.rolling:
             np.copyto(key_minus, self.minus_run[sl])
             np.copyto(key_plus, self.plus_run[sl])
         elif h_px * n < 32000:  # remap converts coordinates to int16
             stacked = self.costs.reshape(n * h_px, w_px)
-            for key, shift in ((key_minus, -float(h_px)), (key_plus, float(h_px))):
+            for key, v_shifted in ((key_minus, self.v_minus), (key_plus, self.v_plus)):
                 cv2.remap(
                     stacked,
                     self.u_grid[sl],
-                    cv2.add(rows, shift, dst=far_tmp),
+                    cv2.scaleAdd(index, float(h_px), v_shifted[sl], dst=far_tmp),  # row of index -+ 1 in costs
                     cv2.INTER_NEAREST,
                     dst=key,
                     borderMode=cv2.BORDER_CONSTANT,
                     borderValue=NO_MATCH,
                 )
         else:
+            rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], dst=stack_row)  # row of (index, v) in costs
             flat = rows.astype(np.int64) * w_px + np.arange(w_px)
             keys = self.costs.reshape(-1)
             np.copyto(key_minus, keys.take(flat - h_px * w_px, mode="clip"))
@@ -306,6 +308,9 @@ def _carry_neighbours(key: np.ndarray, views: tuple, a: int, b: int) -> None:
 def _row_bands(window: RowWindow, num_disparities: int, merge_gap: int = 40) -> list[list[tuple[int, int]]]:
     """For each disparity index, the bands ``[a, b)`` of rows that search it (bands at most ``merge_gap`` rows apart
     are merged: each band costs a few OpenCV calls and half a window of rows above and below)."""
+    h_px = window.lo.size
+    if not window.lo.any() and (window.hi == num_disparities - 1).all():  # the full window: every row
+        return [[(0, h_px)] for _ in range(num_disparities)]
     i = np.arange(num_disparities)[:, None]
     inside = np.zeros((num_disparities, window.lo.size + 2), np.int8)
     inside[:, 1:-1] = (window.lo[None, :] <= i) & (i <= window.hi[None, :])
