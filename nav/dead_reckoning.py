@@ -119,8 +119,19 @@ class WheelOdometry:
         # steering with unsteered corner wheels, a dragged wheel) the wheels slide sideways more readily than they
         # slip along their rolling direction
         self.lateral_weight = lateral_weight
+        self._memo: tuple[EncoderSample, EncoderSample, OdometryIncrement] | None = None
 
     def increment(self, prev: EncoderSample, cur: EncoderSample) -> OdometryIncrement:
+        """Body motion between encoder samples ``prev`` and ``cur`` (the last pair's result is kept: estimators
+        that share this odometry and see the same samples solve it once)."""
+        memo = self._memo
+        if memo is not None and memo[0] is prev and memo[1] is cur:
+            return memo[2]
+        inc = self._solve(prev, cur)
+        self._memo = (prev, cur, inc)
+        return inc
+
+    def _solve(self, prev: EncoderSample, cur: EncoderSample) -> OdometryIncrement:
         g = self.geometry
         s = g.wheel_radius_m * (np.asarray(cur.wheel_angle_rad) - np.asarray(prev.wheel_angle_rad))
         steer = np.zeros(len(WHEELS))
@@ -160,9 +171,10 @@ class DeadReckoner:
         level_at_rest: bool = True,
         rest_gyro_rad_s: float = np.radians(0.05),
         rest_accel_tol_m_s2: float = 0.02,
+        odometry: WheelOdometry | None = None,
     ) -> None:
         pose = initial_pose or Pose.identity()
-        self.odometry = WheelOdometry(geometry)
+        self.odometry = odometry or WheelOdometry(geometry)  # may be shared with another estimator (same wheels)
         self.attitude = AttitudeEstimator(pose.quat_wxyz, gyro_bias_rad_s)
         self.level_at_rest = level_at_rest
         self.rest_gyro_rad_s = rest_gyro_rad_s
