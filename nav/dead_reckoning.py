@@ -22,6 +22,7 @@ corrected (the IMU keeps attitude well).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -71,11 +72,24 @@ class AttitudeEstimator:
 
     def propagate(self, imu_samples: Sequence[ImuSample]) -> None:
         """Integrate body rates: ``q <- q (x) exp(w dt / 2)`` with the trapezoidal mean rate of consecutive samples."""
+        # plain floats: numpy's per-call overhead on 3- and 4-vectors was most of the cost (the same arithmetic,
+        # operation for operation, as the array form _qnorm(_qmul(q, _qexp(w dt))))
+        q = None
+        bx, by, bz = np.asarray(self.gyro_bias_rad_s, dtype=float).tolist()
+        last = self._last
         for s in imu_samples:
-            if self._last is not None and s.t_s > self._last.t_s:
-                w = 0.5 * (np.asarray(s.gyro_rad_s) + np.asarray(self._last.gyro_rad_s)) - self.gyro_bias_rad_s
-                self.quat_wxyz = _qnorm(_qmul(self.quat_wxyz, _qexp(w * (s.t_s - self._last.t_s))))
-            self._last = s
+            if last is not None and s.t_s > last.t_s:
+                if q is None:
+                    q = tuple(np.asarray(self.quat_wxyz, dtype=float).tolist())
+                g1, g0 = s.gyro_rad_s, last.gyro_rad_s
+                dt = s.t_s - last.t_s
+                w = (0.5 * (float(g1[0]) + float(g0[0])) - bx, 0.5 * (float(g1[1]) + float(g0[1])) - by,
+                     0.5 * (float(g1[2]) + float(g0[2])) - bz)  # fmt: skip
+                q = _fqnorm(_fqmul(q, _fqexp((w[0] * dt, w[1] * dt, w[2] * dt))))
+            last = s
+        self._last = last
+        if q is not None:
+            self.quat_wxyz = np.array(q)
 
     def set_attitude(self, quat_wxyz: np.ndarray) -> None:
         self.quat_wxyz = _qnorm(np.asarray(quat_wxyz, dtype=float))
@@ -105,8 +119,19 @@ class WheelOdometry:
         # steering with unsteered corner wheels, a dragged wheel) the wheels slide sideways more readily than they
         # slip along their rolling direction
         self.lateral_weight = lateral_weight
+        self._memo: tuple[EncoderSample, EncoderSample, OdometryIncrement] | None = None
 
     def increment(self, prev: EncoderSample, cur: EncoderSample) -> OdometryIncrement:
+        """Body motion between encoder samples ``prev`` and ``cur`` (the last pair's result is kept: estimators
+        that share this odometry and see the same samples solve it once)."""
+        memo = self._memo
+        if memo is not None and memo[0] is prev and memo[1] is cur:
+            return memo[2]
+        inc = self._solve(prev, cur)
+        self._memo = (prev, cur, inc)
+        return inc
+
+    def _solve(self, prev: EncoderSample, cur: EncoderSample) -> OdometryIncrement:
         g = self.geometry
         s = g.wheel_radius_m * (np.asarray(cur.wheel_angle_rad) - np.asarray(prev.wheel_angle_rad))
         steer = np.zeros(len(WHEELS))
@@ -146,9 +171,10 @@ class DeadReckoner:
         level_at_rest: bool = True,
         rest_gyro_rad_s: float = np.radians(0.05),
         rest_accel_tol_m_s2: float = 0.02,
+        odometry: WheelOdometry | None = None,
     ) -> None:
         pose = initial_pose or Pose.identity()
-        self.odometry = WheelOdometry(geometry)
+        self.odometry = odometry or WheelOdometry(geometry)  # may be shared with another estimator (same wheels)
         self.attitude = AttitudeEstimator(pose.quat_wxyz, gyro_bias_rad_s)
         self.level_at_rest = level_at_rest
         self.rest_gyro_rad_s = rest_gyro_rad_s
@@ -265,3 +291,33 @@ def _qexp(rotvec: np.ndarray) -> np.ndarray:
 def _qnorm(q: np.ndarray) -> np.ndarray:
     q = q / np.linalg.norm(q)
     return q if q[0] >= 0 else -q
+
+
+def _fqmul(a: tuple, b: tuple) -> tuple:
+    """:func:`_qmul` on float 4-tuples."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return (
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    )
+
+
+def _fqexp(r: tuple) -> tuple:
+    """:func:`_qexp` on a float 3-tuple."""
+    x, y, z = r
+    th = math.sqrt(x * x + y * y + z * z)
+    if th < 1e-12:
+        return _fqnorm((1.0, 0.5 * x, 0.5 * y, 0.5 * z))
+    s = math.sin(th / 2)
+    return (math.cos(th / 2), s * x / th, s * y / th, s * z / th)
+
+
+def _fqnorm(q: tuple) -> tuple:
+    """:func:`_qnorm` on a float 4-tuple."""
+    w, x, y, z = q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return (w, x, y, z) if w >= 0 else (-w, -x, -y, -z)

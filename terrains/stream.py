@@ -235,6 +235,7 @@ class StreamedSite:
         self._cache_tiles = cache_tiles
         self._albedo: OrderedDict[tuple, np.ndarray] = OrderedDict()
         self.tiles_built = 0
+        self._crater_cells: dict[tuple[int, int], list[_Crater]] = {}  # crater cells drawn so far (520 m+ each)
         self._explicit = [_Crater(c.center_xy_m[0], c.center_xy_m[1], c) for c in recipe.craters]
         self.material = {"bedrock": Material.BEDROCK, "mixed": Material.MIXED}.get(recipe.material.kind,
                                                                                    Material.SAND)  # fmt: skip
@@ -263,7 +264,10 @@ class StreamedSite:
             cy0, cy1 = int(math.floor(y.min() / side)) - 1, int(math.floor(y.max() / side)) + 1
             for cx in range(cx0, cx1 + 1):
                 for cy in range(cy0, cy1 + 1):
-                    out += random_craters(self.stream, self.seed, cx, cy)
+                    cell = self._crater_cells.get((cx, cy))
+                    if cell is None:  # the same draw each time (seeded by the cell): drawn once
+                        cell = self._crater_cells[(cx, cy)] = random_craters(self.stream, self.seed, cx, cy)
+                    out += cell
         return out
 
     # -- tiles

@@ -115,7 +115,7 @@ class Onboard:
         self.geometry = geometry or RoverGeometry()
         self.shape = shape  # design data for the shadow prediction (None: no shadow masking)
         self.dead_reckoning = DeadReckoner(self.geometry, start_pose)  # wheels + IMU only, for comparison
-        self.estimator = DeadReckoner(self.geometry, start_pose)  # corrected by VO: the pose the rover drives on
+        self.estimator = DeadReckoner(self.geometry, start_pose, odometry=self.dead_reckoning.odometry)  # VO-corrected
         self.vo = vo
         self.stereo = stereo
         self.planner_factory = planner_factory

@@ -511,7 +511,7 @@ class StereoRenderer:
         """
         if self.world.terrain_version != self.sim.terrain_version:  # streamed terrain: the window moved
             self.close()
-            self.world = RenderWorld(self.sim, self.config)
+            self.world = RenderWorld(self.sim, self.config, self.lens.max_render_px)  # as built in __init__
         w = self.world
         w.sync()
         cams = [camera_model(w.model, w.data, n, px, px) for n in cam_names]

@@ -175,6 +175,10 @@ class RoverSim:
         self._rock_index = {
             m.geom(f"{ROCK_GEOM_PREFIX}{i:04d}").id: i for i in range(len(terrain.rocks))
         }  # rock geom id -> index into terrain.rocks
+        self._is_rock = np.zeros(m.ngeom, dtype=bool)
+        self._is_rock[list(self._rock_index)] = True
+        self._on_rover = m.geom_bodyid != 0
+        self._is_wheel_geom = np.array([m.geom(g).name.startswith("wheel_") for g in range(m.ngeom)])
 
     def _follow_rover(self) -> None:
         """Streamed terrain: move the heightfield window when the rover has entered another tile."""
@@ -436,7 +440,10 @@ class RoverSim:
         """(rover geom, rock name) pairs in contact now, for rocks at least ``min_height_m`` tall (ground truth)."""
         m, d = self.model, self.data
         out = []
-        for g1, g2 in d.contact.geom[: d.ncon]:
+        pairs = d.contact.geom[: d.ncon]
+        if not self._is_rock[pairs].any():  # the usual case: only wheels on the ground
+            return out
+        for g1, g2 in pairs:
             for a, b in ((g1, g2), (g2, g1)):
                 idx = self._rock_index.get(int(b))
                 if idx is not None and m.geom_bodyid[a] != 0 and self.terrain.rocks[idx].height_m >= min_height_m:
@@ -447,7 +454,10 @@ class RoverSim:
         """Names of non-wheel rover geoms touching the terrain or a rock (a collision, for GESTALT checks)."""
         m, d = self.model, self.data
         names = []
-        for g1, g2 in d.contact.geom[: d.ncon]:
+        pairs = d.contact.geom[: d.ncon]
+        if not (~self._is_wheel_geom[pairs] & self._on_rover[pairs]).any():  # the usual case: wheels only
+            return names
+        for g1, g2 in pairs:
             for a, b in ((g1, g2), (g2, g1)):
                 na = m.geom(a).name
                 if m.geom_bodyid[b] == 0 and not na.startswith("wheel_") and m.geom_bodyid[a] != 0:

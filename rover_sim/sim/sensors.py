@@ -163,6 +163,46 @@ class ImuModel:
         gyro, accel = self.corrupt(dt, gyro_true_rad_s, accel_true_m_s2)
         return ImuSample(t_s=t_s, gyro_rad_s=gyro[0], accel_m_s2=accel[0])
 
+    def measure_many(self, t_s: list[float], gyro_true_rad_s: np.ndarray, accel_true_m_s2: np.ndarray) -> list:
+        """:meth:`measure` for consecutive samples at once, number for number: each sample draws its noise in the
+        same order (bias drive, gyro white, accel white) and the bias recursion is the same arithmetic as
+        ``corrupt``'s one-sample ``lfilter``, so the result equals one :meth:`measure` call per sample (the
+        sensor suite corrupts the samples of a tick in one go, off the physics loop)."""
+        n = len(t_s)
+        if n == 0:
+            return []
+        p = self.params
+        dts = []
+        last = self._last_t_s
+        for t in t_s:
+            dt = 1.0 / p.rate_hz if last is None else t - last
+            if dt <= 0.0:
+                raise ValueError(f"IMU samples must move forward in time (t={t}, previous {last})")
+            dts.append(dt)
+            last = t
+        self._last_t_s = last
+        gyro_true = np.asarray(gyro_true_rad_s, dtype=float).reshape(n, 3)
+        accel_true = np.asarray(accel_true_m_s2, dtype=float).reshape(n, 3)
+        if self.errors.gyro_matrix is not None:  # row by row: the same product as one sample at a time
+            gyro_true = np.concatenate([g[None, :] @ self.errors.gyro_matrix.T for g in gyro_true])
+        if self.errors.accel_matrix is not None:
+            accel_true = np.concatenate([a[None, :] @ self.errors.accel_matrix.T for a in accel_true])
+        z = self._rng.standard_normal((n, 3, 3))  # per sample: bias drive, gyro white, accel white
+        zb = z[:, 0].tolist()
+        bias = np.empty((n, 3))
+        b0, b1, b2 = self.gyro_bias_rad_s.tolist()
+        for k in range(n):
+            phi = math.exp(-dts[k] / p.gyro_bias_corr_time_s)
+            scale = p.gyro_bias_rad_s * math.sqrt(1.0 - phi * phi)
+            d0, d1, d2 = zb[k]
+            b0, b1, b2 = d0 * scale + phi * b0, d1 * scale + phi * b1, d2 * scale + phi * b2
+            bias[k] = (b0, b1, b2)
+        self.gyro_bias_rad_s = bias[-1].copy()
+        root_dt = np.array([math.sqrt(dt) for dt in dts])[:, None]
+        gyro = gyro_true + bias + z[:, 1] * (p.gyro_white_rad_sqrt_s / root_dt)
+        accel = accel_true + self.accel_bias_m_s2 + z[:, 2] * (p.accel_white_m_s2_sqrt_hz / root_dt)
+        return [ImuSample(t_s=t, gyro_rad_s=g, accel_m_s2=a) for t, g, a in zip(t_s, gyro, accel, strict=True)]
+
 
 @dataclass(frozen=True)
 class EncoderParams:
@@ -225,6 +265,8 @@ class SensorSuite:
         self.encoders = EncoderModel(encoders, self.errors)
         self.steps_per_imu_sample = max(1, int(round(1.0 / (self.imu.params.rate_hz * sim.timestep_s))))
         self._imu: list[ImuSample] = []
+        self._raw_t: list[float] = []  # IMU samples taken but not yet corrupted (see poll)
+        self._raw_imu: list[tuple[np.ndarray, np.ndarray]] = []
         self._enc: list[EncoderSample] = []
         self._next_enc_t = -math.inf
         self.sample(sim)
@@ -240,7 +282,8 @@ class SensorSuite:
         """Take one IMU sample now, and an encoder sample if one is due."""
         t = sim.time_s
         gyro, accel = sim.imu_raw()
-        self._imu.append(self.imu.measure(t, gyro, accel))
+        self._raw_t.append(t)  # corrupted in one batch when polled (ImuModel.measure_many: the same numbers)
+        self._raw_imu.append((gyro, accel))
         if t + TIME_TOL_S >= self._next_enc_t:
             self._enc.append(self.encoders.measure(t, sim.wheel_angles_rad(), sim.steer_angles_rad()))
             period = 1.0 / self.encoders.params.rate_hz
@@ -249,9 +292,16 @@ class SensorSuite:
 
     def poll(self) -> tuple[list[ImuSample], list[EncoderSample]]:
         """All samples taken since the previous call, oldest first: (IMU samples, encoder samples)."""
+        self._flush_imu()
         imu, enc = self._imu, self._enc
         self._imu, self._enc = [], []
         return imu, enc
+
+    def _flush_imu(self) -> None:
+        if self._raw_t:
+            raw = np.array(self._raw_imu)  # (n, 2, 3): true gyro, true specific force
+            self._imu.extend(self.imu.measure_many(self._raw_t, raw[:, 0], raw[:, 1]))
+            self._raw_t, self._raw_imu = [], []
 
     def detach(self) -> None:
         """Stop sampling inside the physics loop."""

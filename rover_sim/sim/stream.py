@@ -8,7 +8,7 @@ the hfield geom to the window's centre. Every world point keeps its height (the 
 coordinates), so the rover's state needs no change and contacts carry on (see tests/rover_sim/test_stream.py).
 The encoding's elevation range is fixed at compile time (:data:`MIN_ELEVATION_RANGE_M` or more) so every later
 window fits it; only the base moves. Rocks are a pool of ellipsoid geoms (``sim/world.py``) moved and resized
-in place.
+in place; the world body's bounding-volume tree is then rebuilt (``sim/bvh.py``) so MuJoCo's midphase stays on.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from rover_sim.sim.bvh import rebuild_body_bvh
 from rover_sim.sim.world import ROCK_GEOM_PREFIX, hfield_encoding, park_point_m, rock_slot_geometry
 from terrains.stream import StreamedSite, WindowTerrain
 
@@ -95,3 +96,4 @@ class TerrainStreamer:
             model.geom_rbound[gid] = max(size)
             model.geom_aabb[gid] = [0.0, 0.0, 0.0, *size]
             model.geom_conaffinity[gid] = 1 if i < len(window.rocks) else 0  # parked slots skip the pair tests
+        rebuild_body_bvh(model)  # the world body's midphase tree, for the moved hfield and rocks (sim/bvh.py)

@@ -135,13 +135,12 @@ def park_point_m(terrain: Terrain) -> tuple[float, float, float]:
 def _add_rock_slots(spec: mujoco.MjSpec, terrain: Terrain, slots: int) -> None:
     """``slots`` ellipsoid rock geoms (streamed terrains): the terrain's rocks first, the rest parked.
 
-    MuJoCo bounds the world body's static geoms once, at compile time (its bounding-volume tree), so geoms moved
-    later would fall outside it and lose their contacts: the last two slots are compiled at opposite corners
-    ``SITE_HALF_EXTENT_M`` away, so the world body's bound covers the whole site, and the midphase (the tree's
-    inner nodes, stale after a move) is switched off; contact pairs are still culled by bounding spheres.
+    MuJoCo bounds the world body's static geoms at compile time (its bounding-volume tree), so geoms moved later
+    would fall outside it and lose their contacts: the streamer rebuilds that tree after every move
+    (``sim/bvh.py``), and the last two slots are compiled at opposite corners ``SITE_HALF_EXTENT_M`` away so the
+    world body's bound covers the whole site from the start.
     """
     park = park_point_m(terrain)
-    spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_MIDPHASE)
     corners = {slots - 1: (SITE_HALF_EXTENT_M, SITE_HALF_EXTENT_M, SITE_HALF_EXTENT_M),
                slots - 2: (-SITE_HALF_EXTENT_M, -SITE_HALF_EXTENT_M, -SITE_HALF_EXTENT_M)}  # fmt: skip
     for i in range(slots):

@@ -231,3 +231,25 @@ def test_vo_correction_replaces_the_dead_reckoned_increment():
     # full 6-DOF variant
     p = apply_vo_correction(start, vo_motion, before, update_attitude=True)
     np.testing.assert_allclose(p.as_matrix(), start.as_matrix() @ vo_motion, atol=1e-12)
+
+
+def test_attitude_propagation_equals_the_quaternion_array_form():
+    """propagate() runs on plain floats for speed; it must give exactly q <- qnorm(q (x) qexp(w dt)) per sample
+    (the array helpers), including the tiny-angle branch and a gyro bias."""
+    from nav.dead_reckoning import AttitudeEstimator, _qexp, _qmul, _qnorm
+
+    rng = np.random.default_rng(4)
+    for size in (1e-13, 1e-4, 0.05, 1.0):
+        ts = [1.0 + 0.01 * k for k in range(400)]
+        gyro = rng.normal(size=(len(ts), 3)) * size
+        bias = rng.normal(size=3) * 1e-14
+        q0 = rng.normal(size=4)
+        est = AttitudeEstimator(q0, bias)
+        samples = [ImuSample(t_s=t, gyro_rad_s=gyro[k], accel_m_s2=np.zeros(3)) for k, t in enumerate(ts)]
+        for i in range(0, len(ts), 12):
+            est.propagate(samples[i : i + 12])
+        q = _qnorm(np.asarray(q0, float))
+        for k in range(1, len(ts)):
+            w = 0.5 * (gyro[k] + gyro[k - 1]) - bias
+            q = _qnorm(_qmul(q, _qexp(w * (ts[k] - ts[k - 1]))))
+        np.testing.assert_array_equal(est.quat_wxyz, q)

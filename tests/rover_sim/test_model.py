@@ -113,11 +113,12 @@ def test_climbs_a_20cm_rock_keeping_six_wheels_down():
     )  # partly buried: a sloping face, as most rocks
     sim = RoverSim(_flat(material="bedrock", explicit=[rock]))
     sim.place(-1.6, 0.0, 0.0)
-    contact_ticks, wheel_z = [], []
+    contact_ticks, wheel_z, on_rock = [], [], []
 
     def on_tick(s):
         contact_ticks.append(s.wheels_in_contact().all())
         wheel_z.append(s.wheel_centres_m()[:, 2])
+        on_rock.append(s.rock_contacts(min_height_m=0.15))
 
     execute(sim, Straight(3.2), speed_m_s=0.05, on_tick=on_tick)
     assert sim.position_m()[0] > 1.3, "the rover got over the rock"
@@ -128,6 +129,20 @@ def test_climbs_a_20cm_rock_keeping_six_wheels_down():
         f"wheel left the ground in {100 * (1 - np.mean(contact_ticks)):.1f} % of ticks"
     )
     assert not sim.body_contacts()
+    touched = {pair for hits in on_rock for pair in hits}
+    assert touched and {rock for _, rock in touched} == {"step20"}
+    assert {geom.split("_")[0] for geom, _ in touched} == {"wheel"}  # the left wheels rolled over it
+    assert not any(on_rock[:5]) and sim.rock_contacts(min_height_m=0.25) == []
+
+
+def test_body_touching_the_ground_is_a_body_contact():
+    sim = RoverSim(_flat())
+    sim.place(0.0, 0.0, 0.0, settle_s=0.2)
+    assert sim.body_contacts() == []
+    sim.data.qpos[2] -= 0.45  # sink the chassis into the ground
+    mujoco.mj_forward(sim.model, sim.data)
+    hits = sim.body_contacts()
+    assert hits and not any(h.startswith("wheel_") for h in hits)
 
 
 def test_physics_divergence_is_a_clean_error():

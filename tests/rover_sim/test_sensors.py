@@ -173,3 +173,27 @@ def test_sensor_point_mast(sensor_slope_sim) -> None:
             point_mast(sim, 0.0, 2.0)
     finally:
         point_mast(sim, 0.0, 0.0)
+
+
+def test_batched_imu_measurements_equal_one_at_a_time() -> None:
+    """The suite corrupts a tick's samples in one batch (ImuModel.measure_many): the numbers must be exactly those
+    of one ``measure`` call per sample, with mounting/scale errors and uneven sample spacing."""
+    from rover_sim.sim.sensors import OdometryErrors
+
+    errors = OdometryErrors.draw(7, imu_misalignment_mrad=1.0, gyro_scale_factor_ppm=100.0,
+                                 accel_scale_factor_ppm=100.0)  # fmt: skip
+    rng = np.random.default_rng(0)
+    ts = [1.0 + 0.005 * k for k in range(0, 1200, 2)]  # float steps: the spacing varies in its last bits
+    gyro, accel = rng.normal(size=(len(ts), 3)), rng.normal(size=(len(ts), 3)) + [0.0, 0.0, MARS_G]
+    for err in (errors, OdometryErrors.none()):
+        one, many = ImuModel(seed=3, errors=err), ImuModel(seed=3, errors=err)
+        a = [one.measure(t, gyro[k], accel[k]) for k, t in enumerate(ts)]
+        b = []
+        for i in range(0, len(ts), 13):
+            b += many.measure_many(ts[i : i + 13], gyro[i : i + 13], accel[i : i + 13])
+        assert [s.t_s for s in a] == [s.t_s for s in b]
+        np.testing.assert_array_equal([s.gyro_rad_s for s in a], [s.gyro_rad_s for s in b])
+        np.testing.assert_array_equal([s.accel_m_s2 for s in a], [s.accel_m_s2 for s in b])
+        np.testing.assert_array_equal(one.gyro_bias_rad_s, many.gyro_bias_rad_s)
+    with pytest.raises(ValueError, match="forward in time"):
+        ImuModel(seed=1).measure_many([1.0, 1.0], np.zeros((2, 3)), np.zeros((2, 3)))
