@@ -298,7 +298,11 @@ SOIL_MODEL_DEFAULTS = {"soil_model": "bekker", "deformable": False}
 
 
 class PhysicsSpec(_Spec):
-    timestep_s: float = Field(0.005, ge=0.0005, le=0.01)
+    timestep_s: float = Field(
+        0.005, ge=0.0005, le=0.01,
+        description="Physics step, s. 0.005 is the step the soil law was calibrated at (every catalogue scenario); a "
+        "coarser step trades slip accuracy for speed (README: Speed of long drives).",
+    )
     soil_model: Literal["bekker", "wong_reece"] = Field(
         "bekker",
         description="Wheel-soil law: 'bekker' (default) or the experimental 'wong_reece' (README: Experimental soil).",

@@ -141,3 +141,56 @@ def test_tiles_are_logged_once_and_compactly(tmp_path) -> None:
     rows = entity_row_counts(path)
     assert rows["/world/terrain/tiles/t0_0"] == 1 and "/world/terrain/tiles/t2_1" in rows
     assert path.stat().st_size < 12 * 60_000  # about 60 kB a 4 m tile with its rocks, at most
+
+
+def _rock_drive(midphase: bool, seconds: float = 30.0) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Drive +x through a dense rock field over 2 m tiles (re-centres move the hfield and the rock pool)."""
+    import mujoco
+
+    recipe = _recipe(cover=0.25)
+    recipe = recipe.model_copy(update={"streamed": recipe.streamed.model_copy(update={"tile_m": 2.0,
+                                                                                      "rock_slots": 64})})
+    st = TerrainStreamer(recipe, seed=5)
+    sim = RoverSim(st.initial_window(0.5, 0.0), streamer=st)
+    if not midphase:
+        sim.model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_MIDPHASE)
+    sim.place(0.5, 0.0, 0.0, settle_s=1.0)
+    rate = np.full(6, 0.04 / 0.125)
+    qpos, ncon, rock_ticks = [], [], 0
+    for _ in range(int(seconds * 8)):
+        sim.step(rate, 25)
+        qpos.append(sim.data.qpos.copy())
+        ncon.append(sim.data.ncon)
+        rock_ticks += bool(sim.rock_contacts())
+    return np.array(qpos), np.array(ncon), rock_ticks, st.recentres
+
+
+def test_midphase_with_rebuilt_tree_matches_the_all_pairs_test() -> None:
+    """The world body's bounding-volume tree is rebuilt after each window move (sim/bvh.py), so MuJoCo's midphase
+    can stay on: the same drive with the midphase switched off (every geom pair tested) is bit-identical."""
+    q_on, n_on, rocks_on, recentres = _rock_drive(midphase=True)
+    q_off, n_off, rocks_off, _ = _rock_drive(midphase=False)
+    assert recentres >= 1 and rocks_on > 0  # the drive moved the window and touched rocks
+    np.testing.assert_array_equal(q_on, q_off)
+    np.testing.assert_array_equal(n_on, n_off)
+    assert rocks_on == rocks_off
+
+
+def test_rebuilt_tree_bounds_every_moved_geom() -> None:
+    from rover_sim.sim.bvh import world_boxes
+
+    st = TerrainStreamer(_recipe(cover=0.1), seed=5)
+    sim = RoverSim(st.initial_window(0.0, 0.0), streamer=st)
+    st.apply(sim.model, st.site.window((3, -2)))  # far from where the model was compiled
+    m = sim.model
+    adr, num = int(m.body_bvhadr[0]), int(m.body_bvhnum[0])
+    leaves = m.bvh_nodeid[adr : adr + num]
+    geoms = leaves[leaves >= 0]
+    centres, halves = world_boxes(m, geoms)
+    root = m.bvh_aabb[adr]
+    assert (np.abs(centres - root[:3]) + halves <= root[3:] + 1e-9).all()  # the root holds every leaf box
+    for node in range(num):  # every inner box holds its children's boxes
+        for ch in m.bvh_child[adr + node]:
+            if ch >= 0:
+                p, c = m.bvh_aabb[adr + node], m.bvh_aabb[adr + ch]
+                assert (np.abs(c[:3] - p[:3]) + c[3:] <= p[3:] + 1e-9).all()
