@@ -111,7 +111,7 @@ def write_setup_outputs(sc: Scenario, metrics: Metrics, out_dir: Path) -> None:
 
 SOL_TRACK_SPACING_M = 0.1  # a sol's drive: track vertices 10 cm apart ...
 SOL_TRACK_BLOCK_POINTS = 32  # ... in short blocks, so each track update re-sends little (recording ~ distance)
-SOL_MAX_POINTS = 5000  # stereo point clouds subsampled to this (a full navcam cloud is about 600 kB)
+SOL_MAX_POINTS = 2000  # stereo point clouds subsampled to this: 24 kB a VO step (a full navcam cloud is ~600 kB)
 
 
 def sol_recording(sc: Scenario) -> dict:
