@@ -8,7 +8,7 @@ reckoner re-levels roll and pitch from the accelerometers at rest, so the site f
 differ by heading and translation only) and takes a panorama:
 
 1. the mast sweeps the navcam pair in pan (``pan_step_deg``) at each ``elevations_deg``; every pair is rendered at
-   ``resolution_px`` through the scenario's sensor profile, as the mission's own pairs are (:meth:`_panorama_pair`),
+   ``resolution_px`` through the scenario's sensor profile, as the mission's own pairs are (:meth:`panorama_pair`),
    and matched by :func:`nav.rocks.panorama_points` (binned near field, full-resolution far field);
 2. rover-frame points are mapped into the world through the **onboard pose estimate** (VO-corrected dead
    reckoning; never the truth), the rover's own body is cut out, the cloud is cropped to ``max_range_m`` and thinned
@@ -225,7 +225,7 @@ class RockSiteSurvey:
             for pan in self._pans():
                 self._point_mast(pan, elevation)
                 t0 = time.perf_counter()
-                pair = self._panorama_pair()
+                pair = self.panorama_pair()
                 rig = pair.rig
                 t1 = time.perf_counter()
                 pts = panorama_points(pair.left_u8, pair.right_u8, rig, cfg.stereo)
@@ -266,7 +266,7 @@ class RockSiteSurvey:
         self.progress(f"site {site.index}: {len(rocks)} rocks from {len(cloud)} points")
         return site
 
-    def _panorama_pair(self) -> StereoImages:
+    def panorama_pair(self) -> StereoImages:
         """The navcam pair at the current (settled) pointing, as stereo sees it: ideal profile, the pinhole pair and
         its exact rig; otherwise the pair the sensor profile delivers with the onboard models at the commanded
         pointing, through the onboard rectification (see the module docstring)."""
