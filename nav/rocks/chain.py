@@ -61,6 +61,12 @@ class ChainParams:
     # Measured rock-edge yaw errors reach 0.15 deg at a fitted 0.04-0.07 deg; 0.05 deg chosen on the tuning
     # survey (rock_localization --seed 1, half the rocks irregular) from 0 / 0.05 / 0.1
     rock_yaw_sigma_site_deg: float = 0.05
+    # gross rock edges (data snooping on the solved graph, Baarda 1968): a rock edge whose whitened residual after the
+    # adjustment exceeds this chi-square (4 dof: x, y, z, heading; 99.9 %, the textbook level, not fitted) is
+    # dropped, the worst first, and the chain re-solved. A correlated tie-point error (all matched rocks of a pair
+    # seen from far, a bias the match residuals cannot show) can put a whole transform 5 sigma off; the odometry
+    # legs and the other rock edges then disagree with it. Odometry legs are never dropped. 0 disables it
+    edge_gate_chi2: float = 18.47
     match: MatchParams = MatchParams()
 
 
@@ -130,6 +136,7 @@ class SiteChain:
         self.sites: list[ChainSite] = []
         self.matches: dict[tuple[int, int], SiteMatch] = {}
         self.range_bias_m: tuple[float, ...] = ()  # estimated tie-point error terms (see ChainParams)
+        self.dropped_edges: list[tuple[int, int, float]] = []  # rock edges failing the gate: (i, j, chi-square)
         self._edges: list[_Edge] = []
         self._parent: dict[tuple[int, int], tuple[int, int]] = {}
 
@@ -271,7 +278,22 @@ class SiteChain:
 
     # -- solving
     def solve(self) -> None:
-        """Weighted least squares over the site poses (site 0 fixed) and the tie-point error terms.
+        """Adjust (:meth:`_adjust`), then drop the worst rock edge beyond ``edge_gate_chi2`` and re-adjust, until
+        every rock edge passes (see :class:`ChainParams`)."""
+        while True:
+            chi2 = self._adjust()
+            rocks = [k for k, e in enumerate(self._edges) if e.kind == "rocks"]
+            if self.params.edge_gate_chi2 <= 0 or not rocks:
+                return
+            worst = max(rocks, key=lambda k: chi2[k])
+            if chi2[worst] <= self.params.edge_gate_chi2:
+                return
+            e = self._edges.pop(worst)
+            self.dropped_edges.append((e.i, e.j, chi2[worst]))
+
+    def _adjust(self) -> list[float]:
+        """Weighted least squares over the site poses (site 0 fixed) and the tie-point error terms; returns each
+        edge's whitened squared residual at the solution.
 
         Each edge's residual is the measured relative pose (a rock edge corrected by its derivative times the error
         terms) minus the one the current poses give, whitened by the edge's covariance; the error terms carry a
@@ -279,7 +301,7 @@ class SiteChain:
         """
         n = len(self.sites)
         if n < 2:
-            return
+            return [0.0] * len(self._edges)
         P = self.params
         n_bias = P.range_bias_terms if any(e.kind == "rocks" for e in self._edges) else 0
         whiten = [np.linalg.cholesky(np.linalg.inv(e.cov)).T for e in self._edges]
@@ -306,6 +328,8 @@ class SiteChain:
         for k in range(1, n):
             self.sites[k].correction = X[k].compose(self.sites[k].estimate.inverse())
         self.range_bias_m = tuple(float(b) for b in res.x[4 * (n - 1) :])
+        r = residuals(res.x)
+        return [float(np.sum(r[4 * k : 4 * k + 4] ** 2)) for k in range(len(self._edges))]
 
 
 CHI2_3DOF_MEDIAN = 2.366  # median of a chi-square with 3 degrees of freedom

@@ -63,12 +63,15 @@ def bench_rocks(
     config: SurveyConfig = SurveyConfig(),
     seed: int | None = None,
     irregular_fraction: float | None = None,
+    profile: str | None = None,
 ) -> dict:
     """Run the survey, print the markdown tables, write ``json_path`` (if given) and return the results.
     ``seed`` replaces the scenario's (another rock field along the same legs: a held-out check);
-    ``irregular_fraction`` replaces ``terrain.rocks.irregular_fraction`` (irregular rocks mixed in)."""
+    ``irregular_fraction`` replaces ``terrain.rocks.irregular_fraction`` (irregular rocks mixed in);
+    ``profile`` replaces ``sensors.profile`` ("flight" or "ideal"; the panoramas, the drive's VO and dead
+    reckoning all follow it)."""
     t0 = time.perf_counter()
-    sc = load_scenario(scenario, seed=seed)
+    sc = load_scenario(scenario, [f'sensors.profile="{profile}"'] if profile is not None else None, seed=seed)
     if irregular_fraction is not None:
         rocks = sc.terrain.rocks.model_validate(
             sc.terrain.rocks.model_dump() | {"irregular_fraction": irregular_fraction}
@@ -116,6 +119,7 @@ def bench_rocks(
         "model_type_match_frac": _analytic_frac(total, well_only=False),
         "model_type_match_frac_well_observed": _well_observed_frac(total),
         # extras
+        "profile": sc.sensors.profile,
         "irregular_fraction": sc.terrain.rocks.irregular_fraction,
         "by_rock_class": _by_class(sites, terrain),
         "model_type_count": int(np.sum(_analytic(total))),
@@ -264,6 +268,7 @@ def _print(result: dict, per_site: list[ExtractionEval], pairs: list[MatchEval])
         return "yes" if flag else "NO"
 
     c = result["chain_error_m"]
+    print(f"sensor profile: {result['profile']}\n")
     print("| figure | measured | acceptance | ok |")
     print("|---|---:|---|:-:|")
     print(f"| extraction recall (rocks > 20 cm, <= 30 m) | {result['recall']:.3f} | >= 0.90 "

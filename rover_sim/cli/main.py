@@ -204,6 +204,9 @@ def bench_rocks_cmd(
         float | None,
         typer.Option("--irregular-fraction", min=0.0, max=1.0, help="Fraction of irregular rocks (0..1)."),
     ] = None,
+    profile: Annotated[
+        str | None, typer.Option("--profile", help="Sensor profile: flight | ideal (default: the scenario's).")
+    ] = None,
 ) -> None:
     """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
     figures by rock class (analytic / irregular) with --irregular-fraction."""
@@ -211,7 +214,9 @@ def bench_rocks_cmd(
         from rover_sim.bench.junit_cases import rocks_cases
         from rover_sim.bench.rocks import bench_rocks
 
-        result = bench_rocks(str(json) if json else None, seed=seed, irregular_fraction=irregular_fraction)
+        result = bench_rocks(
+            str(json) if json else None, seed=seed, irregular_fraction=irregular_fraction, profile=profile
+        )
     finish(junit, "bench rocks", rocks_cases(result))
 
 

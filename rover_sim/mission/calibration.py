@@ -152,11 +152,37 @@ def cameras_at_pointing(
     return [camera_model(model, scratch, n, px, px) for n in names]
 
 
-def build_true_lens(model: mujoco.MjModel, data: mujoco.MjData, calibration: RunCalibration, native_px: int):  # noqa: ANN201
-    """The renderer's :class:`~rover_sim.render.lens.TrueLens` for every camera at ``native_px``."""
+def onboard_stereo_models(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    calibration: RunCalibration | None,
+    camera: str,
+    px: int,
+    pan_deg: float,
+    elevation_deg: float,
+) -> tuple[StereoRig, StereoCalibration | None]:
+    """What flight software holds for ``camera``'s pair at ``px`` and the *commanded* mast pointing: without lens
+    errors (``calibration`` None) the exact pinhole rig there (only the mast encoders err); with them the calibrated
+    raw models and the rectified rig they define (what :meth:`~rover_sim.mission.onboard.Onboard.rectified` uses)."""
+    names = [f"{camera}_left", f"{camera}_right"]
+    pins = cameras_at_pointing(model, data, names, px, pan_deg, elevation_deg)
+    if calibration is None:
+        return StereoRig(pins[0], pins[1]), None
+    calib = StereoCalibration(calibration.onboard_model(pins[0]), calibration.onboard_model(pins[1]), target=pins[0])
+    return rectification(calib).rig, calib
+
+
+def build_true_lens(  # noqa: ANN201
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    calibration: RunCalibration,
+    native_px: int,
+    pairs: tuple[str, ...] = STEREO_PAIRS,
+):
+    """The renderer's :class:`~rover_sim.render.lens.TrueLens` for the cameras of ``pairs`` at ``native_px``."""
     from rover_sim.render.lens import TrueLens
 
-    names = [f"{p}_{s}" for p in STEREO_PAIRS for s in ("left", "right")]
+    names = [f"{p}_{s}" for p in pairs for s in ("left", "right")]
     models = {n: calibration.render_model(camera_model(model, data, n, native_px, native_px)) for n in names}
     return TrueLens(models, calibration.spec)
 

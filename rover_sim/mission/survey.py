@@ -8,7 +8,8 @@ reckoner re-levels roll and pitch from the accelerometers at rest, so the site f
 differ by heading and translation only) and takes a panorama:
 
 1. the mast sweeps the navcam pair in pan (``pan_step_deg``) at each ``elevations_deg``; every pair is rendered at
-   ``resolution_px`` and matched by :func:`nav.rocks.panorama_points` (binned near field, full-resolution far field);
+   ``resolution_px`` through the scenario's sensor profile, as the mission's own pairs are (:meth:`panorama_pair`),
+   and matched by :func:`nav.rocks.panorama_points` (binned near field, full-resolution far field);
 2. rover-frame points are mapped into the world through the **onboard pose estimate** (VO-corrected dead
    reckoning; never the truth), the rover's own body is cut out, the cloud is cropped to ``max_range_m`` and thinned
    to ``voxel_m``;
@@ -21,6 +22,15 @@ the gyro's heading drift over the leg's duration. Ground truth (the terrain's ro
 is used only by the ``evaluate_*`` functions below: to map a site's estimated frame onto the true world (truth pose
 composed with the inverse onboard pose) and to associate extracted rocks with the generated ones.
 
+Sensor profile: with ``[sensors.lens]`` on (flight) the panorama pairs are raw images through the run's true lenses
+(:mod:`rover_sim.render.lens`) and the CCD image formation (:mod:`rover_sim.render.imaging`), rectified on board
+with the run's *calibrated* models at the *commanded* mast pointing (the mast stops within its encoder errors):
+:func:`rover_sim.mission.calibration.onboard_stereo_models` and
+:meth:`rover_sim.mission.onboard.Onboard.rectified`, the calls the mission's own pairs go through, with the same
+seeded calibration draw. The ``ideal`` profile renders the exact pinhole pairs, as before. At 2048 px a
+rendered pixel is a quarter of a 1024^2 CCD photosite; the image formation then gives each pixel a photosite's
+noise (it never splits a photosite), a little noisier than an upsampled 1024^2 image.
+
 Dead reckoning and VO estimates come from the same drive: the runner keeps a pure wheel/IMU dead reckoner beside
 the onboard (VO-corrected) one, so both are measured, not simulated.
 """
@@ -31,6 +41,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from types import MappingProxyType
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -50,6 +61,8 @@ from nav.rocks import (
     panorama_points,
     voxel_downsample,
 )
+from rover_sim.mission.calibration import build_true_lens, onboard_stereo_models
+from rover_sim.mission.observation import Observation, StereoImages
 from rover_sim.mission.onboard import VoStep
 from rover_sim.mission.pipeline import Mission
 from rover_sim.mission.scenario import GotoCmd, Scenario
@@ -127,15 +140,23 @@ class RockSiteSurvey:
         self.keep_points = keep_points
         t0 = time.perf_counter()
         self.mission = Mission(scenario)
+        self.calibration = self.mission.world.calibration  # the run's true lenses and calibration (None: ideal)
         noise = ImageNoise(seed=scenario.seed + 1) if config.image_noise else None
+        sim = self.mission.sim
+        lens = None
+        if self.calibration is not None:  # the run's navcams at the panorama's resolution
+            lens = build_true_lens(sim.model, sim.data, self.calibration, config.resolution_px, pairs=("navcam",))
         self.renderer = StereoRenderer(
-            self.mission.sim,
+            sim,
             RenderConfig(
                 resolution_px=config.resolution_px,
                 noise=noise,
                 shadows=config.shadows and scenario.sun.shadows,
                 shadow_half_extent_m=config.shadow_half_extent_m,
+                imaging=scenario.sensors.imaging,  # "ideal": ``noise`` as before; "ccd": the flight image chain
+                imaging_seed=scenario.seed + 1,
             ),
+            lens=lens,
         )
         self.build_s = time.perf_counter() - t0
         self.sites: list[SiteSurvey] = []
@@ -191,7 +212,7 @@ class RockSiteSurvey:
     def survey_site(self, drive_s: float = 0.0) -> SiteSurvey:
         """Panorama at the current stop: points through the onboard pose, then rock extraction."""
         m, cfg = self.mission, self.config
-        timings = {"drive": drive_s, "render": 0.0, "stereo": 0.0}
+        timings = {"drive": drive_s, "render": 0.0, "stereo": 0.0}  # render: acquisition and rectification
         sim = m.sim
         self._stand(REST_BEFORE_PANORAMA_S)
         T_onboard = m.onboard.pose.as_matrix()  # the panorama is mapped through this estimate
@@ -203,11 +224,11 @@ class RockSiteSurvey:
         for elevation in cfg.elevations_deg:
             for pan in self._pans():
                 self._point_mast(pan, elevation)
-                rig = self.renderer.rig("navcam")  # calibrated at the commanded pointing, once settled
                 t0 = time.perf_counter()
-                frame = self.renderer.render_pair("navcam")
+                pair = self.panorama_pair()
+                rig = pair.rig
                 t1 = time.perf_counter()
-                pts = panorama_points(frame.left, frame.right, rig, cfg.stereo)
+                pts = panorama_points(pair.left_u8, pair.right_u8, rig, cfg.stereo)
                 timings["render"] += t1 - t0
                 timings["stereo"] += time.perf_counter() - t1
                 body = (np.abs(pts[:, 0]) < ROVER_BOX_HALF_M[0]) & (np.abs(pts[:, 1]) < ROVER_BOX_HALF_M[1])
@@ -244,6 +265,24 @@ class RockSiteSurvey:
         self.sites.append(site)
         self.progress(f"site {site.index}: {len(rocks)} rocks from {len(cloud)} points")
         return site
+
+    def panorama_pair(self) -> StereoImages:
+        """The navcam pair at the current (settled) pointing, as stereo sees it: ideal profile, the pinhole pair and
+        its exact rig; otherwise the pair the sensor profile delivers with the onboard models at the commanded
+        pointing, through the onboard rectification (see the module docstring)."""
+        world = self.mission.world
+        if self.calibration is None and not self.sc.sensors.lens.has_mast_error:
+            rig = self.renderer.rig("navcam")
+            frame = self.renderer.render_pair("navcam")
+            return StereoImages("navcam", frame.t_s, frame.left, frame.right, rig)
+        sim, px = world.sim, self.config.resolution_px
+        pan, elevation = world.mast_pan_deg, world.mast_elevation_deg  # commanded
+        rig, calib = onboard_stereo_models(sim.model, sim.data, self.calibration, "navcam", px, pan, elevation)
+        frame = self.renderer.render_pair("navcam")
+        images = {"navcam": StereoImages("navcam", frame.t_s, frame.left, frame.right, rig, calib)}
+        obs = Observation(t_s=frame.t_s, images=MappingProxyType(images), mast_pan_deg=world.mast_pan_deg,
+                          mast_elevation_deg=world.mast_elevation_deg)  # fmt: skip
+        return self.mission.onboard.rectified(obs, "navcam")
 
     def _pans(self) -> list[float]:
         n = max(1, int(round(360.0 / self.config.pan_step_deg)))

@@ -18,9 +18,9 @@ import numpy as np
 
 from nav.camera import StereoRig
 from nav.geometry import R_to_quat_wxyz
-from nav.rectify import StereoCalibration, rectification
+from nav.rectify import StereoCalibration
 from nav.trajectory import Pose
-from rover_sim.mission.calibration import MastEncoders, RunCalibration, build_true_lens, cameras_at_pointing
+from rover_sim.mission.calibration import MastEncoders, RunCalibration, build_true_lens, onboard_stereo_models
 from rover_sim.mission.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
 from rover_sim.mission.observation import Observation, StereoImages
 from rover_sim.mission.scenario import Scenario
@@ -180,15 +180,10 @@ class World:
         if self.calibration is None and not spec.has_mast_error:  # ideal: the exact rig at the current state
             self._rigs[camera], self._calibrations[camera] = self.renderer.rig(camera), None
             return self._rigs[camera]
-        names = [f"{camera}_left", f"{camera}_right"]
-        px = self.renderer.config.resolution_px
-        pins = cameras_at_pointing(self.sim.model, self.sim.data, names, px, self.mast_pan_deg, self.mast_elevation_deg)
-        if self.calibration is None:
-            self._rigs[camera], self._calibrations[camera] = StereoRig(pins[0], pins[1]), None
-        else:
-            calib = StereoCalibration(self.calibration.onboard_model(pins[0]), self.calibration.onboard_model(pins[1]),
-                                      target=pins[0])  # fmt: skip
-            self._rigs[camera], self._calibrations[camera] = rectification(calib).rig, calib
+        self._rigs[camera], self._calibrations[camera] = onboard_stereo_models(
+            self.sim.model, self.sim.data, self.calibration, camera, self.renderer.config.resolution_px,
+            self.mast_pan_deg, self.mast_elevation_deg,
+        )  # fmt: skip
         return self._rigs[camera]
 
     def onboard_rig(self, camera: str) -> StereoRig:

@@ -106,12 +106,13 @@ class IdentityLens:
 
 
 class TrueLens:
-    """The true raw cameras of every pair at ``native_px`` (models hold the mounting rotation as ``T_rover_cam``)."""
+    """The true raw cameras of the pairs in ``models`` at ``native_px`` (models hold the mounting rotation as
+    ``T_rover_cam``; a pair without models cannot be drawn through this lens)."""
 
     def __init__(self, models: dict[str, CameraModel], spec: LensErrorSpec) -> None:
         self.models = models
         self.views: dict[str, RenderView] = {}
-        for pair in STEREO_PAIRS:
+        for pair in (p for p in STEREO_PAIRS if f"{p}_left" in models):
             ms = [models[f"{pair}_left"], models[f"{pair}_right"]]
             limit = None if pair == "navcam" else spec.hazcam_max_off_axis_deg
             self.views[pair] = render_view(ms, limit, spec.render_oversample)
@@ -120,6 +121,8 @@ class TrueLens:
     @contextmanager
     def view(self, model: mujoco.MjModel, pair: str, native_px: int) -> Iterator[int]:
         """While drawing ``pair``: the render model's cameras take the wide view; yields the side to render."""
+        if pair not in self.views:
+            raise ValueError(f"this true lens has no {pair} models (built for: {', '.join(self.views)})")
         v = self.views[pair]
         built_px = next(iter(v.maps.values()))[0].shape[0]
         if native_px != built_px:

@@ -589,6 +589,32 @@ def test_chain_fuses_good_odometry_with_rocks() -> None:
     chain, odo_err, fused = drive_chain(P, leg_sigma_m=0.01, yaw_sigma_deg=0.3)
     assert len(chain.matches) == 6  # consecutive sites only (the others are over 26 m apart)
     assert np.mean(fused[1:]) < 0.7 * np.mean(odo_err[1:])
+    assert not chain.dropped_edges  # consistent rock edges pass the gate
+
+
+def test_chain_drops_rock_edges_the_rest_of_the_graph_contradicts() -> None:
+    """Five sites 15 m apart with exact VO-like legs (1 cm per axis); site 2's tie points are all 25 cm off (an
+    error common to one panorama, which the match residuals cannot show): both of its rock edges fail the
+    chi-square gate and are dropped, the others kept, and site 2 stays where the odometry puts it. Without the gate
+    the rocks pull it off by several centimetres."""
+    field = rock_field(700, 60.0, seed=8)
+    true_xy = [(-30.0 + 15.0 * k, 3.0 * (-1) ** k) for k in range(5)]
+
+    def run(params: ChainParams) -> tuple[SiteChain, float]:
+        chain = SiteChain(params)
+        for k, xy in enumerate(true_xy):
+            est = Pose4(np.array([*xy, 0.0]), 0.0)  # exact odometry, 1 cm claimed
+            frame = Pose4(np.array([0.25, 0.0, 0.0]), 0.0) if k == 2 else Pose4()
+            site = observe(field, xy, frame, seed=40 + k)
+            driven = 0.0 if k == 0 else math.dist(xy, true_xy[k - 1])
+            chain.add_site(site, est.t_m, driven, odometry_cov_m2=np.diag([1e-4, 1e-4, 1e-4]), leg_s=600.0)
+        return chain, float(np.linalg.norm(chain.sites[2].adjusted_xyz_m[:2] - true_xy[2]))
+
+    gated, err_gated = run(ChainParams())
+    plain, err_plain = run(ChainParams(edge_gate_chi2=0.0))
+    assert sorted((i, j) for i, j, _ in gated.dropped_edges) == [(1, 2), (2, 3)]
+    assert len(gated.matches) == 4 and not plain.dropped_edges
+    assert err_gated < 0.02 and err_plain > 0.05
 
 
 def test_robust_tie_points_drop_gross_pairs_that_bias_the_transform() -> None:
