@@ -255,7 +255,10 @@ class WheelSoilLaw:
             nx, ny, nz = -inputs[c + 1], -inputs[c + 2], -inputs[c + 3]
             W = sqrt(nx * nx + ny * ny + nz * nz)
             if W < 1e-6:
-                self._jx[w] = self._jy[w] = self._bow[w] = 0.0
+                # Lifted off (a bounce): the sheared soil stays where it is and is only renewed as the wheel
+                # advances over it (no source without contact); resetting it would lose the mobilised thrust
+                # at every bounce, and bounces are more frequent the faster the rover drives.
+                self._lift_off(w, inputs, dt_s, alpha)
                 out_W[w] = out_z[w] = out_fl[w] = out_ft[w] = out_c[w] = out_tq[w] = 0.0
                 out_slip[w] = math.nan
                 continue
@@ -332,3 +335,20 @@ class WheelSoilLaw:
             out_slip[w] = (v_rim - v_x) / v_rim if abs(v_rim) > _ROLLING_EPS_M_S else math.nan
         return out
 
+    def _lift_off(self, w: int, inputs: list[float], dt_s: float, alpha: float) -> None:
+        """Shear states of wheel ``w`` while it is out of contact: renewed by its advance, no source."""
+        nw = self.n_wheels
+        k = 7 * nw + 3 * w
+        h = k + 3 * nw
+        vx_w, vy_w = inputs[k], inputs[k + 1]
+        hx, hy = inputs[h], inputs[h + 1]
+        hn = math.hypot(hx, hy) or 1.0
+        v_x = (vx_w * hx + vy_w * hy) / hn
+        v_y = (-vx_w * hy + vy_w * hx) / hn
+        vf = self._vf[w]
+        vf[0] += alpha * (inputs[13 * nw + w] * self.radius_m - vf[0])
+        vf[1] += alpha * (v_x - vf[1])
+        vf[2] += alpha * (v_y - vf[2])
+        decay = math.exp(-max(abs(vf[0]), abs(vf[1]), abs(vf[2])) / self._patch[w] * dt_s)
+        self._jx[w] *= decay
+        self._jy[w] *= decay
