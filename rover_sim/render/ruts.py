@@ -38,7 +38,7 @@ class TileRuts:
         self.model, self.tiles, self.sim, self.every_m = model, tiles, sim, every_m
         t = sim.terrain
         self._cell, self._x0, self._y0 = t.cell_size_m, -t.half_x_m, -t.half_y_m
-        self._shown = np.asarray(t.heights_m, dtype=float).copy()  # the heights the tile meshes show
+        self._shown: np.ndarray | None = None  # the heights the tile meshes show (copied once deformation is on)
         self._ids = tiles.geom_ids(model)
         self._last_xy: np.ndarray | None = None
         self._pending: tuple[int, int, int, int] | None = None
@@ -50,6 +50,8 @@ class TileRuts:
         deform = self.sim.deform
         if deform is None:
             return 0
+        if self._shown is None:
+            self._shown = np.asarray(self.sim.terrain.heights_m, dtype=float).copy()
         box = deform.pop_dirty_cells()
         if box is not None:
             p = self._pending
