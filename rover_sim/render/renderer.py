@@ -53,6 +53,7 @@ from rover_sim.errors import RenderingUnavailable
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
 from rover_sim.render.imaging import ImageFormation, ImagingSpec
 from rover_sim.render.lens import IdentityLens, TrueLens, pair_of
+from rover_sim.render.ruts import TileRuts
 from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles: re-exported from here
     GROUP_HIDDEN,
     GROUP_SHOWN,
@@ -327,6 +328,7 @@ class RenderWorld:
             raise RuntimeError("render model layout differs from the physics model (render-only geoms only!)")
         m = self.model
         self.tile_ids = self.tiles.geom_ids(m)
+        self.ruts = TileRuts(m, self.tiles, sim)  # deformable terrain: tiles re-meshed where the ground changed
         self.rock_ids = np.array([m.geom(n).id for n in rock_names], dtype=np.int32)
         self.geom_to_phys = _geom_id_map(m, sim.model)
         self.sun_id = m.light("sun").id
@@ -513,6 +515,7 @@ class StereoRenderer:
             self.close()
             self.world = RenderWorld(self.sim, self.config, self.lens.max_render_px)  # as built in __init__
         w = self.world
+        w.ruts.refresh(list(self._renderers.values()))  # no-op without [physics] deformable
         w.sync()
         cams = [camera_model(w.model, w.data, n, px, px) for n in cam_names]
         poses = [camera_world_pose(w.model, w.data, n) for n in cam_names]

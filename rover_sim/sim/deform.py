@@ -17,8 +17,8 @@ Updates are throttled: a wheel writes when its contact has moved ``UPDATE_M`` or
 last write, so the per-step cost is a distance check per wheel (see ``rover-sim bench slip``'s speed rows).
 
 Rendering: the render model draws LOD tile meshes, not the physics heightfield (``rover_sim.render.tiles``); the
-tiles are not re-meshed here, so camera images do not show the ruts yet — the physics heightfield and
-``terrain_after.npz`` do.
+cells changed since the last render (:meth:`DeformableTerrain.pop_dirty_cells`) are re-meshed into those tiles by
+``rover_sim.render.ruts`` before each render, so the cameras see the ruts.
 """
 
 from __future__ import annotations
@@ -60,6 +60,7 @@ class DeformableTerrain:
         self._zf = [0.0] * 6  # sinkage low-passed over SINK_FILTER_S (load spikes of vibration do not dig)
         self._alpha = sim.timestep_s / (SINK_FILTER_S + sim.timestep_s)
         self.enabled = True
+        self._dirty: tuple[int, int, int, int] | None = None  # (i0, i1, j0, j1) cells changed since pop_dirty_cells
 
     # ------------------------------------------------------------------ state
     def heights_m(self) -> np.ndarray:
@@ -69,6 +70,16 @@ class DeformableTerrain:
         """Depth of the surface below the undisturbed ground at (x, y) (nearest cell), m (negative on a berm)."""
         i, j = self._cell_of(x, y)
         return self._h0[i][j] - self._h[i][j]
+
+    def heights_box_m(self, i0: int, i1: int, j0: int, j1: int) -> np.ndarray:
+        """Current heights of rows ``i0..i1`` and columns ``j0..j1`` (inclusive), m."""
+        return np.array([row[j0 : j1 + 1] for row in self._h[i0 : i1 + 1]])
+
+    def pop_dirty_cells(self) -> tuple[int, int, int, int] | None:
+        """Inclusive cell box ``(i0, i1, j0, j1)`` holding every cell changed since the last call (None: none);
+        for one consumer (the render model's tiles, ``rover_sim.render.ruts``)."""
+        box, self._dirty = self._dirty, None
+        return box
 
     def _cell_of(self, x: float, y: float) -> tuple[int, int]:
         j = min(max(int((x - self._x0) / self._cell + 0.5), 0), self._ncol - 1)
@@ -137,6 +148,14 @@ class DeformableTerrain:
             for i, j in berm:
                 h[i][j] += dh
                 self._push(i, j)
+        if displaced > 0.0:
+            d = self._dirty or (ci, ci, cj, cj)
+            self._dirty = (
+                max(min(d[0], ci - span), 0),
+                min(max(d[1], ci + span), self._nrow - 1),
+                max(min(d[2], cj - span), 0),
+                min(max(d[3], cj + span), self._ncol - 1),
+            )
 
     def _push(self, i: int, j: int) -> None:
         self._hf[self._adr + i * self._ncol + j] = (self._h[i][j] - self._base) / self._scale

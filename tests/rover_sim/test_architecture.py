@@ -20,7 +20,7 @@ ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("rover_sim", "nav", "terrains")
 MAX_LINES = 600
 # private attributes of third-party objects the code legitimately touches (MuJoCo's renderer context, a pool size)
-THIRD_PARTY_PRIVATE = {"_mjr_context", "_processes"}
+THIRD_PARTY_PRIVATE = {"_mjr_context", "_gl_context", "_processes"}  # mujoco.Renderer, multiprocessing
 
 
 def _modules() -> dict[str, Path]:

@@ -4,6 +4,8 @@ The default Bekker law is tested in test_terramechanics.py."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -156,3 +158,22 @@ def test_bedrock_params_are_stiffer_than_sand():
     assert BEDROCK.shear_modulus_m < SAND.shear_modulus_m
     assert BEDROCK.friction_angle_deg > SAND.friction_angle_deg
     assert not BEDROCK.deformable and SAND.deformable
+
+
+def test_shear_state_survives_a_bounce_and_is_renewed_only_by_the_advance():
+    """A wheel lifted off for a few steps keeps the soil's shear state (the soil under it is still sheared); it
+    decays only as the wheel advances over fresh soil. Resetting it made slip depend on speed (bounces are more
+    frequent at 5 cm/s than at 1 cm/s)."""
+    law = WheelSoilLaw(n_wheels=1)
+    v_rim, slip, r = 0.05, 0.3, law.radius_m
+    on = pack_inputs([[0, 0, 108.0]], [[0, 0, 0]], [[v_rim * (1 - slip), 0, 0]], [[1, 0, 0]], [v_rim / r])
+    for _ in range(4000):
+        law.evaluate(on, [0], 0.005)
+    j0, L, f0 = law.j_m[0, 0], law.patch_m[0], law.state.traction_n[0]
+    assert j0 / L == pytest.approx(slip, abs=0.01)
+    off = pack_inputs([[0, 0, 0.0]], [[0, 0, 0]], [[v_rim * (1 - slip), 0, 0]], [[1, 0, 0]], [v_rim / r])
+    for _ in range(4):  # a 20 ms bounce
+        law.evaluate(off, [0], 0.005)
+    assert law.j_m[0, 0] == pytest.approx(j0 * math.exp(-v_rim / L * 0.02), rel=1e-3)
+    law.evaluate(on, [0], 0.005)
+    assert f0 > 10.0 and law.state.traction_n[0] > 0.9 * f0  # the thrust is there again on landing
