@@ -35,6 +35,7 @@ from rover_sim.sim.terramechanics_wr import SAND, WheelParams, WheelSoilLaw
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
 
 CELL_M = 0.04  # the scenarios' cell size
+EAGLE_DEG = (17.0, 18.0, 19.0, 20.0)  # issue #13: 40-65 % uphill sand slip across this range (Eagle crater)
 MAX_WARMUP_M = 3.0  # commanded travel after which the slip window opens even if the wheelbase is not made good
 SOIL_MODEL = "wong_reece"
 EXPERIMENTAL_NOTE = (
@@ -315,6 +316,12 @@ def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "run
     checks = [
         ("cell size", f"{CELL_M} m", "0.04 m (the scenarios')", True),
         ("max step between slopes 1 deg apart, 10-25 deg", f"{100 * max(steps):.1f} pp", "<= 8 pp", max(steps) <= 0.08),
+        (
+            "sand slip at 17 / 18 / 19 / 20 deg",
+            " / ".join(f"{100 * fine[a]:.0f}" for a in EAGLE_DEG) + " %",
+            "40-65 % each (Eagle crater, Opportunity)",
+            all(0.40 <= fine[a] <= 0.65 for a in EAGLE_DEG),
+        ),
         (
             "first slope with slip >= 100 %",
             "none" if back is None else f"{back:.0f} deg",
