@@ -108,7 +108,8 @@ class RoverEnv(gymnasium.Env):
     encoder error, then rectified through the *calibrated* models at the commanded pointing
     (:func:`~rover_sim.mission.calibration.onboard_stereo_models`, :func:`nav.rectify.rectification`, as
     :meth:`rover_sim.mission.onboard.Onboard.rectified` does), so calibration errors reach a policy as they reached
-    MER's stereo and VO (the shapes are the same in both profiles).
+    MER's stereo and VO (the shapes are the same in both profiles). ``render()`` (``rgb_array``) is a colour pinhole
+    view for people, not a sensor: it is the same in both profiles.
 
     **Info** (ground truth, never observed): ``position_m``, ``quat_wxyz``, ``tilt_deg``, ``wheel_slip`` (0 where
     not rolling, see ``wheel_slip_valid``), ``wheel_sinkage_m``, ``wheel_load_n``, ``wheel_in_contact``,
