@@ -4,8 +4,9 @@ Registered as ``rover_sim/MER-v0`` (goal = the scenario's destination, not obser
 (a random goal per episode, given in the observation). Registration is lazy (``entry_point`` string): importing
 ``rover_sim`` imports gymnasium but not mujoco; the world is built on ``reset``.
 
-Built on the world layer only (terrains, RoverSim, SensorSuite, StereoRenderer, drive primitives), the way
-``rover_sim.mission.pipeline.Mission`` builds a world. The honesty rule holds: observations carry only what the
+Built on the world layer (terrains, RoverSim, SensorSuite, StereoRenderer, drive primitives), the way
+``rover_sim.mission.pipeline.Mission`` builds a world, and on the mission's camera chain for the sensor profile
+(``[sensors] profile``, see :class:`RoverEnv`). The honesty rule holds: observations carry only what the
 rover senses (images, IMU, encoders, commanded mast pointing, an operator-given goal); ground truth goes to
 ``info``. GL: each world owns one EGL context; vector environments must use ``context="spawn"``.
 """
@@ -24,6 +25,8 @@ from gymnasium import spaces
 from rover_sim.errors import PhysicsDiverged
 
 if TYPE_CHECKING:
+    from nav.rectify import Rectification
+    from rover_sim.mission.calibration import RunCalibration
     from rover_sim.mission.scenario import Scenario
     from rover_sim.render.renderer import StereoRenderer
     from rover_sim.sim.physics import RoverSim
@@ -87,7 +90,8 @@ class RoverEnv(gymnasium.Env):
     tilt) happens at one of the 8 Hz ticks.
 
     **Observation** ``Dict`` (no ground truth): ``"<pair>_left"`` / ``"<pair>_right"`` uint8 ``(H, W)`` greyscale
-    images of each stereo pair in ``cameras`` (navcam, hazcam_front, hazcam_rear); ``"imu"`` float32
+    images of each stereo pair in ``cameras`` (navcam, hazcam_front, hazcam_rear), always *rectified* (what the
+    flight software gave its stereo and VO); ``"imu"`` float32
     ``(imu_samples, 6)``: gyro rad/s and accelerometer m/s^2 (body frame, 100 Hz) taken since the previous step,
     oldest first, the most recent ``imu_samples`` kept, rows ``[:imu_count]`` valid and the rest zero;
     ``"imu_count"`` (Discrete); ``"encoders"`` float32 ``(10,)``: wheel angles (6, cumulative, rad, order lf lm lr
@@ -95,18 +99,34 @@ class RoverEnv(gymnasium.Env):
     (rad); with ``goal_in_obs`` also ``"goal"`` float32 ``(2,)``: the goal in the operator-given start frame
     (x ahead, y left, metres), known before the drive as on Mars.
 
+    **Images and the sensor profile** (``[sensors] profile`` of the scenario, "flight" by default): with "ideal"
+    they are the exact pinhole pairs (rectified by construction), ``image_noise`` adding the renderer's simple
+    noise. With "flight" they follow the mission's chain (:class:`rover_sim.mission.world.World`): raw pairs
+    through the true lenses (:mod:`rover_sim.render.lens`, a seeded mounting/calibration draw per world,
+    :class:`~rover_sim.mission.calibration.RunCalibration`) and the CCD image formation
+    (:mod:`rover_sim.render.imaging`, always noisy: ``image_noise`` does not apply), the mast stopping within its
+    encoder error, then rectified through the *calibrated* models at the commanded pointing
+    (:func:`~rover_sim.mission.calibration.onboard_stereo_models`, :func:`nav.rectify.rectification`, as
+    :meth:`rover_sim.mission.onboard.Onboard.rectified` does), so calibration errors reach a policy as they reached
+    MER's stereo and VO (the shapes are the same in both profiles). ``render()`` (``rgb_array``) is a colour pinhole
+    view for people, not a sensor: it is the same in both profiles.
+
     **Info** (ground truth, never observed): ``position_m``, ``quat_wxyz``, ``tilt_deg``, ``wheel_slip`` (0 where
     not rolling, see ``wheel_slip_valid``), ``wheel_sinkage_m``, ``wheel_load_n``, ``wheel_in_contact``,
     ``body_contacts`` and ``rock_contacts`` (during the step), ``goal_xy``, ``goal_distance_m``, ``termination``
-    (``goal``, ``collision``, ``keep_out``, ``tilt``, ``physics_diverged`` or None), ``drive``, ``world_seed``.
+    (``goal``, ``collision``, ``keep_out``, ``tilt``, ``physics_diverged`` or None), ``drive``, ``world_seed``,
+    ``image_noise_seed`` (the seed the episode's image noise restarted from).
 
     **Reward**: metres of progress toward the goal times ``reward.progress_weight``, minus ``step_cost``, plus the
     goal bonus or minus the penalty of the terminating event (:class:`RewardConfig`). Truncated after
     ``max_steps``. Physics divergence terminates the episode (``info["termination"] == "physics_diverged"``).
 
     **Seeding**: ``reset(seed=s)`` derives the terrain (unless ``fixed_terrain``), IMU and image noise and a random
-    goal from ``s``; the same seed and actions give the same observations. A world whose terrain seed is unchanged
-    is reused (the rover is placed again), otherwise it is rebuilt and the previous renderer closed.
+    goal from ``s``; the same seed and actions give the same observations. The flight profile's camera hardware
+    (lens and calibration errors, CCD fixed pattern, mast encoder errors) is drawn from the world's seed (the
+    scenario's with ``fixed_terrain``), as a mission run draws it from the scenario seed. A world whose terrain
+    seed is unchanged is reused (the rover is placed again), otherwise it is rebuilt and the previous renderer
+    closed.
 
     Usage::
 
@@ -207,6 +227,9 @@ class RoverEnv(gymnasium.Env):
         self._geom = None
         self._sim: RoverSim | None = None
         self._renderer: StereoRenderer | None = None
+        self._calibration: RunCalibration | None = None
+        self._rectifications: dict[str, Rectification] = {}  # pair -> onboard rectification (flight profile)
+        self._noise_seed = 0
         self._sensors: SensorSuite | None = None
         self._world_seed: int | None = None
         self._world_sc: Scenario | None = None
@@ -221,6 +244,7 @@ class RoverEnv(gymnasium.Env):
 
     # ------------------------------------------------------------------ world
     def _build_world(self, world_seed: int) -> None:
+        from rover_sim.mission.calibration import RunCalibration, build_true_lens
         from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
         from rover_sim.sim.physics import RoverSim
         from rover_sim.sim.world import Sun
@@ -248,8 +272,14 @@ class RoverEnv(gymnasium.Env):
         if sc.physics.deformable:
             self._sim.enable_deformation()
         noise = ImageNoise(seed=0) if self.image_noise else None  # its generator is re-seeded on every reset
-        config = RenderConfig(resolution_px=self.resolution_px, noise=noise, shadows=self.shadows)
-        self._renderer = StereoRenderer(self._sim, config)
+        lens = sc.sensors.lens  # [sensors.lens] / [sensors.imaging]: the camera hardware, as World draws it
+        self._calibration = RunCalibration(lens, world_seed) if lens.enabled else None
+        config = RenderConfig(resolution_px=self.resolution_px, noise=noise, shadows=self.shadows,
+                              imaging=sc.sensors.imaging, imaging_seed=world_seed)  # fmt: skip
+        true_lens = None
+        if self._calibration is not None:
+            true_lens = build_true_lens(self._sim.model, self._sim.data, self._calibration, config.native_px)
+        self._renderer = StereoRenderer(self._sim, config, lens=true_lens)
         self._world_seed, self._world_sc = world_seed, sc
 
     def _close_world(self) -> None:
@@ -260,7 +290,8 @@ class RoverEnv(gymnasium.Env):
             self._renderer.close()
             self._renderer = None
         self._sim = None
-        self._world_seed = self._world_sc = None
+        self._world_seed = self._world_sc = self._calibration = None
+        self._rectifications = {}
 
     def _sample_goal(self, rng: np.random.Generator) -> np.ndarray | None:
         st = self.scenario.start
@@ -302,7 +333,7 @@ class RoverEnv(gymnasium.Env):
         st = sc.start
         sim.place(st.x_m, st.y_m, math.radians(st.yaw_deg))
         self._mast = np.array([math.radians(sc.nav.mast_pan_deg), math.radians(sc.nav.mast_tilt_deg)])
-        sim.set_mast(self._mast[0], -self._mast[1])  # the tilt joint turns about +y: -elevation
+        self._point_mast(sc)
         sim.step_for(1.0)
         odo = sc.sensors.odometry  # [sensors.odometry] (issue #16): none in the ideal profile
         if hasattr(sim.law, "sinkage_rolling_radius"):
@@ -310,6 +341,9 @@ class RoverEnv(gymnasium.Env):
         errors = OdometryErrors.draw(sensor_seed, **odo.drawn_sizes())
         self._sensors = SensorSuite(sim, seed=sensor_seed, errors=errors)
         self._renderer.reseed_noise(noise_seed if self.image_noise else None)
+        if self._renderer.imaging is not None:  # flight: the CCD chain's temporal noise (its fixed pattern stays)
+            self._renderer.imaging.reseed_noise(noise_seed)
+        self._noise_seed = noise_seed
         if self._goal is not None:
             yaw = math.radians(st.yaw_deg)
             d = self._goal - np.array([st.x_m, st.y_m])
@@ -388,6 +422,27 @@ class RoverEnv(gymnasium.Env):
         distance = amount * self.max_drive_m
         return Straight(distance) if abs(k) < MIN_CURVATURE_PER_M else Arc(1.0 / k, distance)
 
+    def _point_mast(self, sc: Scenario) -> None:
+        """Command the scenario's mast pointing; the mast stops within its encoder error (flight), and the onboard
+        rectification of each pair is computed from the calibrated models at the *commanded* pointing (as
+        :meth:`rover_sim.mission.world.World.calibrate` does; none in the ideal profile)."""
+        from nav.rectify import rectification
+        from rover_sim.mission.calibration import MastEncoders, onboard_stereo_models
+
+        sim, lens = self._sim, sc.sensors.lens
+        pan_deg, elevation_deg = sc.nav.mast_pan_deg, sc.nav.mast_tilt_deg
+        pan_true_deg, elevation_true_deg = MastEncoders(lens, sc.seed).true_angles_deg(pan_deg, elevation_deg)
+        sim.set_mast(math.radians(pan_true_deg), -math.radians(elevation_true_deg))  # the tilt joint turns down
+        self._rectifications = {}
+        if self._calibration is None and not lens.has_mast_error:
+            return
+        for pair in self.cameras:
+            _, calib = onboard_stereo_models(
+                sim.model, sim.data, self._calibration, pair, self.resolution_px, pan_deg, elevation_deg
+            )
+            if calib is not None:
+                self._rectifications[pair] = rectification(calib)
+
     def _drain_sensors(self) -> None:
         imu, enc = self._sensors.poll()
         self._imu.extend(imu)
@@ -433,7 +488,11 @@ class RoverEnv(gymnasium.Env):
         obs: dict[str, Any] = {}
         for pair in self.cameras:
             frame = self._renderer.render_pair(pair)
-            obs[f"{pair}_left"], obs[f"{pair}_right"] = frame.left, frame.right
+            left, right = frame.left, frame.right
+            rect = self._rectifications.get(pair)
+            if rect is not None:  # flight: the raw pair through the onboard (calibrated) rectification
+                left, right = rect.apply(left, right)
+            obs[f"{pair}_left"], obs[f"{pair}_right"] = left, right
         n = self.imu_samples
         recent = self._imu[-n:]
         imu = np.zeros((n, 6), dtype=np.float32)
@@ -475,6 +534,7 @@ class RoverEnv(gymnasium.Env):
             "steps": self._steps,
             "imu_samples_total": len(self._imu),
             "world_seed": self._world_seed,
+            "image_noise_seed": self._noise_seed,
         }
         if drive is not None:
             info["drive"] = drive

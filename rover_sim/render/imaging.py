@@ -160,6 +160,11 @@ class ImageFormation:
         self._exposure = 1.0
         self.last_exposure = 1.0  # relative exposure of the last image (diagnostics)
 
+    def reseed_noise(self, seed: int) -> None:
+        """Restart the temporal noise stream as a chain built with ``seed`` would start it; the fixed pattern (the
+        camera hardware, drawn from the construction seed) is kept. For episodes of one world (the Gymnasium env)."""
+        self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), _SEED_TAG, 1]))
+
     @contextmanager
     def replayed_noise(self) -> Iterator[None]:
         """Images formed inside draw their noise from a copy of the run's noise stream, which is then restored:

@@ -169,3 +169,45 @@ def test_keep_out_terminates_with_penalty():
         assert np.hypot(info["position_m"][0] - (START_X_M + 0.6), info["position_m"][1]) < 0.3
     finally:
         env.close()
+
+
+def test_flight_images_are_the_missions_rectified_pairs():
+    """Flight profile: the env's images are the mission chain's pairs (true lenses, CCD formation, onboard
+    rectification through the calibrated models: World + Onboard.rectified) for the same world and noise seed."""
+    from types import SimpleNamespace
+
+    from rover_sim.mission.onboard import Onboard
+    from rover_sim.mission.world import World
+
+    # classic regolith: the env paints the world's soil as before (the texture is not the sensor chain)
+    over = (*SMALL["overrides"], 'appearance.regolith="classic"', "nav.resolution_px=64")
+    pairs = ("navcam", "hazcam_front")  # the hazcams' fisheye makes raw and rectified images far apart
+    kwargs = {**SMALL, "overrides": over, "cameras": pairs, "fixed_terrain": True}
+    flight = RoverEnv(**kwargs)
+    ideal = RoverEnv(**{**kwargs, "overrides": (*over, 'sensors.profile="ideal"')})
+    world = None
+    try:
+        assert flight.scenario.sensors.profile == "flight" and flight.scenario.sensors.lens.enabled
+        obs, info = flight.reset(seed=11)
+        obs_ideal, _ = ideal.reset(seed=11)
+        assert obs in flight.observation_space and obs_ideal in ideal.observation_space
+        for key in ("navcam_left", "hazcam_front_left"):
+            diff = np.abs(obs[key].astype(int) - obs_ideal[key].astype(int)).mean()
+            assert diff > 3.0, (key, diff)  # lens and calibration errors, vignetting, exposure, CCD noise
+        world = World(flight.scenario)  # the scenario's seed is the env's world seed (fixed_terrain)
+        np.testing.assert_array_equal(world.truth_pose().position_xyz_m, info["position_m"])  # same settled pose
+        world.renderer.imaging.reseed_noise(info["image_noise_seed"])
+        frames = {p: world.render(p) for p in pairs}  # in the env's order: the same noise draws
+        observation = world.observation_with([], [], frames)
+        onboard = Onboard(world.start_pose(), None, SimpleNamespace(), lambda: None)  # only its rectification
+        for p in pairs:
+            rectified = onboard.rectified(observation, p)
+            np.testing.assert_array_equal(obs[f"{p}_left"], rectified.left_u8, err_msg=p)
+            np.testing.assert_array_equal(obs[f"{p}_right"], rectified.right_u8, err_msg=p)
+        raw_vs_rectified = np.abs(frames["hazcam_front"].left.astype(int) - obs["hazcam_front_left"]).mean()
+        assert raw_vs_rectified > 5.0, raw_vs_rectified  # the env delivers the rectified pair, not the raw one
+    finally:
+        flight.close()
+        ideal.close()
+        if world is not None:
+            world.close()
