@@ -341,6 +341,8 @@ class Scenario(_Spec):
 
     @model_validator(mode="after")
     def _start_on_patch(self) -> Scenario:
+        if self.terrain.streamed is not None:  # the first window is built around the start: any start is on the site
+            return self
         nrow, ncol = self.terrain.grid_shape
         half_x = (ncol - 1) * self.terrain.cell_size_m / 2 - 1.0
         half_y = (nrow - 1) * self.terrain.cell_size_m / 2 - 1.0
