@@ -11,6 +11,7 @@ import numpy as np
 
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
+from rover_sim.sim.soil_kernel import apply_wheel_wrenches, materials_under
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
 from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
@@ -127,6 +128,8 @@ class RoverSim:
         self._sd_rate = slice(a0 + 78, a0 + 84)
         self._sd_view = self.data.sensordata[a0 : a0 + 84]
         self._wrench: list[tuple[float, ...]] = [(0.0,) * 6] * 6
+        self._forces = np.zeros((6, 3))  # compiled default law: forces and materials per wheel
+        self._mats = np.zeros(6, dtype=np.int64)
         assert m.sensor_adr[m.sensor("wheel_rr_rate").id] == a0 + 83, "sensor layout changed in rover.xml"
         self._imu_gyro = self._sensor_slice("imu_gyro")
         self._imu_accel = self._sensor_slice("imu_accel")
@@ -171,6 +174,10 @@ class RoverSim:
         self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
         self._origin_x, self._origin_y = terrain.origin_xy_m
         self._inv_cell = 1.0 / terrain.cell_size_m
+        # the same lookup as arrays, for the compiled default law (sim/soil_kernel.py)
+        self._mat_grid = np.ascontiguousarray(terrain.materials, dtype=np.int64)
+        self._h_grid = np.ascontiguousarray(terrain.heights_m, dtype=float)
+        self._grid = np.array([self._origin_x, self._origin_y, self._half_x, self._half_y, self._inv_cell], float)
         m = self.model
         self._rock_index = {
             m.geom(f"{ROCK_GEOM_PREFIX}{i:04d}").id: i for i in range(len(terrain.rocks))
@@ -293,17 +300,13 @@ class RoverSim:
             n -= k
 
     def _apply_soil_law(self, dt: float) -> None:
-        sd = self._sd_view.tolist()  # all wheel-soil inputs in one read (layout: models/mer/rover.xml)
-        pos = [(sd[k], sd[k + 1], sd[k + 2]) for k in (4, 11, 18, 25, 32, 39)]
-        f = self.law.evaluate(sd, self._material_under(pos), dt)
-        com = self._xipos[self._wheel_body].tolist()
-        wrench = self._wrench
-        for w in range(6):
-            fx, fy, fz = f[3 * w], f[3 * w + 1], f[3 * w + 2]
-            (px, py, pz), (cx, cy, cz) = pos[w], com[w]
-            rx, ry, rz = px - cx, py - cy, pz - cz
-            wrench[w] = (fx, fy, fz, ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx)
-        self._xfrc[self._wheel_body] = wrench
+        """The default law on the sensor block (layout: models/mer/rover.xml), all compiled (sim/soil_kernel.py):
+        material under each contact, the law's forces, their wrenches about the wheels' centres of mass."""
+        sd = self._sd_view
+        materials_under(sd, self._h_grid, self._mat_grid, self._grid, ROCK_CONTACT_MARGIN_M, MATERIAL_ROCK,
+                        self._mats)  # fmt: skip
+        self.law.evaluate_into(sd, self._mats, dt, self._forces)
+        apply_wheel_wrenches(sd, self._forces, self._wheel_body, self._xipos, self._xfrc)
 
     def _apply_soil_law_wr(self, dt: float) -> None:
         """The experimental Wong-Reece law: forces plus the soil's torque about each axle; then the ruts."""
