@@ -62,6 +62,7 @@ from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles
     TerrainTiles,
     add_terrain_tiles,
 )
+from rover_sim.render.window import ROCK_MATERIAL, follow_window, rock_rgba, slot_box
 from rover_sim.sim.world import ROCK_GEOM_PREFIX
 
 if TYPE_CHECKING:
@@ -71,12 +72,10 @@ if TYPE_CHECKING:
 LUMA_WEIGHTS = np.array([0.299, 0.587, 0.114], dtype=np.float32)  # Rec. 601 luminance of RGB
 DN12_MAX = 4095  # 12-bit camera counts
 MAX_TEXTURE_PX = 16384  # largest texture side llvmpipe (and most GPUs) accept
-ROCK_MATERIAL = "rock_textured"
 ROCK_TEXTURE = "rock_speckle"
 ROCK_TEXTURE_PX = 128
 ROCK_TEXTURE_SCALE_M = 0.3  # one repeat of the rock speckle texture spans this many metres
 ROCK_TEXTURE_SLANT = 0.6  # texcoords use x + 0.6 z and y + 0.6 z so steep rock sides are not stretched
-ROCK_TINT_RGB = (0.82, 0.70, 0.60)  # dust-coated basalt: greyer than the butterscotch soil
 ROCK_SPECKLE_CONTRAST = 0.18  # std of the rock speckle texture, relative
 SUN_DISTANCE_MARGIN_M = 20.0  # the shadow camera sits this far beyond the scene along the sunlight
 NO_HIT_DEPTH_FRACTION = 0.99  # depth at or beyond this fraction of zfar (1500 m) is sky: returned as inf
@@ -237,8 +236,6 @@ def quantise(luma_0_255: np.ndarray, noise: ImageNoise | None, rng: np.random.Ge
 
 def _rock_appearance(spec: mujoco.MjSpec, terrain: Terrain) -> tuple[list[str], np.ndarray]:
     """Give each rock its own grey level (``terrains.rock_albedo``) and a speckle texture; return AABBs."""
-    from terrains import rock_albedo
-
     rng = np.random.default_rng(terrain.seed + 7919)
     noise = np.fft.fft2(rng.normal(0.0, 1.0, (ROCK_TEXTURE_PX, ROCK_TEXTURE_PX)))
     freq = np.fft.fftfreq(ROCK_TEXTURE_PX)
@@ -261,16 +258,14 @@ def _rock_appearance(spec: mujoco.MjSpec, terrain: Terrain) -> tuple[list[str], 
         name = f"{ROCK_GEOM_PREFIX}{i:04d}"
         mesh = spec.mesh(name)
         if mesh is None:  # a streamed rock slot: an ellipsoid primitive (sim/world.py), boxed by its footprint
-            r = rock.footprint_radius_m
-            verts = np.array([[rock.x_m - r, rock.y_m - r, rock.z_base_m - rock.height_m],
-                              [rock.x_m + r, rock.y_m + r, rock.z_base_m + rock.height_m]])  # fmt: skip
+            verts = np.array(slot_box(rock))
         else:
             verts = np.asarray(mesh.uservert, dtype=float).reshape(-1, 3)
             s = verts[:, :2] + ROCK_TEXTURE_SLANT * verts[:, 2:3]
             mesh.usertexcoord = (s / ROCK_TEXTURE_SCALE_M).ravel().tolist()
         g = spec.geom(name)
         g.material, g.group = ROCK_MATERIAL, GROUP_SHOWN
-        g.rgba = [*(rock_albedo(rock, terrain.seed) * np.asarray(ROCK_TINT_RGB)), 1.0]
+        g.rgba = rock_rgba(rock, terrain.seed)
         names.append(name)
         boxes.append([verts.min(axis=0), verts.max(axis=0)])
     return names, np.asarray(boxes).reshape(-1, 2, 3)
@@ -512,8 +507,10 @@ class StereoRenderer:
         ``lit=False`` (depth, segmentation): no shadow casters outside the view are needed.
         """
         if self.world.terrain_version != self.sim.terrain_version:  # streamed terrain: the window moved
-            self.close()
-            self.world = RenderWorld(self.sim, self.config, self.lens.max_render_px)  # as built in __init__
+            contexts = list(self._renderers.values())  # moved in place (window.py); else built as in __init__
+            if not follow_window(self.world, contexts, self.sim.window_texture_rgb()):
+                self.close()
+                self.world = RenderWorld(self.sim, self.config, self.lens.max_render_px)
         w = self.world
         w.ruts.refresh(list(self._renderers.values()))  # no-op without [physics] deformable
         w.sync()

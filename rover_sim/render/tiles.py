@@ -90,15 +90,21 @@ def _tile_mesh(
     return verts, np.concatenate(faces), norms, np.stack([u, v], axis=-1)
 
 
-def add_terrain_tiles(
-    spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_tiles: int, casts_shadows: bool = True
-) -> TerrainTiles:
-    """Add the render-only terrain tiles (all levels, contact-free, massless) to ``spec``; see :class:`TerrainTiles`.
+@dataclass(frozen=True)
+class TileMesh:
+    """One level of one tile: world-frame vertices, faces, normals and texture coordinates (skirt included)."""
 
-    Normals come from the whole grid so shading is continuous across tiles and levels; texture coordinates
-    address the one world-fixed terrain texture. The tile side is ``tile_m`` rounded to a power-of-two number
-    of cells, doubled until there are at most ``max_tiles`` tiles (large terrains).
-    """
+    name: str
+    verts: np.ndarray  # (V, 3) world metres
+    faces: np.ndarray  # (F, 3) vertex indices
+    normals: np.ndarray  # (V, 3) unit
+    uv: np.ndarray  # (V, 2) into the window's terrain texture
+
+
+def tile_meshes(terrain: Terrain, tile_m: float, max_tiles: int) -> tuple[TerrainTiles, list[TileMesh]]:
+    """The render-only terrain of ``terrain``: tile bookkeeping and every tile level's mesh (see
+    :func:`add_terrain_tiles`). The layout (tiles, levels, vertex and face counts) depends only on the grid's
+    shape and cell, so every window of a streamed site has the same one (:func:`write_tile_meshes`)."""
     h = terrain.heights_m
     nrow, ncol = h.shape
     gy, gx = np.gradient(h, terrain.cell_size_m)
@@ -131,29 +137,15 @@ def add_terrain_tiles(
                          for di in (-1, 0, 1) for dj in (-1, 0, 1)], axis=0).ravel()  # fmt: skip
     skirts = worst.ravel() + neighbours + 1e-3
 
-    mat = spec.add_material()
-    mat.name = TILE_MATERIAL
-    src = spec.material("terrain")
-    mat.textures = list(src.textures)
-    mat.rgba, mat.specular, mat.shininess, mat.reflectance = src.rgba, 0.0, 0.0, 0.0
     boxes = np.zeros((len(spans), 2, 3))
     centres, tile_normals = np.zeros((len(spans), 3)), np.zeros((len(spans), 3))
     geom_names = np.full((len(spans), n_levels), "", dtype=object)
+    meshes = []
     for t, tile_levels in enumerate(levels):
         for L, (rows, cols) in enumerate(tile_levels):
             verts, faces, norms, uv = _tile_mesh(terrain, normals, rows, cols, skirts[t])
             name = f"{TILE_PREFIX}{t:05d}_{L}"
-            mesh = spec.add_mesh()
-            mesh.name = name
-            mesh.uservert = verts.ravel().tolist()
-            mesh.userface = faces.ravel().tolist()
-            mesh.usernormal = norms.ravel().tolist()
-            mesh.usertexcoord = uv.ravel().tolist()
-            mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL  # an open sheet has no volume
-            g = spec.worldbody.add_geom()
-            g.name, g.type, g.meshname, g.material = name, mujoco.mjtGeom.mjGEOM_MESH, name, TILE_MATERIAL
-            g.contype, g.conaffinity, g.group, g.mass = 0, 0, GROUP_HIDDEN, 0.0
-            g.castshadow = casts_shadows
+            meshes.append(TileMesh(name, verts, faces, norms, uv))
             geom_names[t, L] = name
             if L == 0:
                 boxes[t] = [verts.min(axis=0), verts.max(axis=0)]
@@ -161,4 +153,57 @@ def add_terrain_tiles(
                 centres[t] = verts[: (i1 - i0 + 1) * (j1 - j0 + 1)].mean(axis=0)  # grid vertices, not the skirt
                 n_mean = normals[i0 : i1 + 1, j0 : j1 + 1].reshape(-1, 3).mean(axis=0)
                 tile_normals[t] = n_mean / np.linalg.norm(n_mean)
-    return TerrainTiles(geom_names, boxes, errors, centres, tile_normals)
+    return TerrainTiles(geom_names, boxes, errors, centres, tile_normals), meshes
+
+
+def add_terrain_tiles(
+    spec: mujoco.MjSpec, terrain: Terrain, tile_m: float, max_tiles: int, casts_shadows: bool = True
+) -> TerrainTiles:
+    """Add the render-only terrain tiles (all levels, contact-free, massless) to ``spec``; see :class:`TerrainTiles`.
+
+    Normals come from the whole grid so shading is continuous across tiles and levels; texture coordinates
+    address the one world-fixed terrain texture. The tile side is ``tile_m`` rounded to a power-of-two number
+    of cells, doubled until there are at most ``max_tiles`` tiles (large terrains).
+    """
+    tiles, meshes = tile_meshes(terrain, tile_m, max_tiles)
+    mat = spec.add_material()
+    mat.name = TILE_MATERIAL
+    src = spec.material("terrain")
+    mat.textures = list(src.textures)
+    mat.rgba, mat.specular, mat.shininess, mat.reflectance = src.rgba, 0.0, 0.0, 0.0
+    for tm in meshes:
+        mesh = spec.add_mesh()
+        mesh.name = tm.name
+        mesh.uservert = tm.verts.ravel().tolist()
+        mesh.userface = tm.faces.ravel().tolist()
+        mesh.usernormal = tm.normals.ravel().tolist()
+        mesh.usertexcoord = tm.uv.ravel().tolist()
+        mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL  # an open sheet has no volume
+        g = spec.worldbody.add_geom()
+        g.name, g.type, g.meshname, g.material = tm.name, mujoco.mjtGeom.mjGEOM_MESH, tm.name, TILE_MATERIAL
+        g.contype, g.conaffinity, g.group, g.mass = 0, 0, GROUP_HIDDEN, 0.0
+        g.castshadow = casts_shadows
+    return tiles
+
+
+def write_tile_meshes(model: mujoco.MjModel, meshes: list[TileMesh]) -> bool:
+    """Overwrite the compiled tile meshes of ``model`` with ``meshes`` (another window of the same layout), in
+    each mesh's compiled frame (MuJoCo stores mesh vertices relative to the mesh's inertial frame, which became
+    its geom's pose): ``v_local = R^T (v_world - p)``, normals rotated alike. False (nothing written) when the
+    layout differs; the caller then compiles a new model. Upload the meshes to GL afterwards."""
+    ids = []
+    for tm in meshes:
+        mid = model.mesh(tm.name).id
+        n = len(tm.verts)
+        if not (model.mesh_vertnum[mid] == model.mesh_normalnum[mid] == model.mesh_texcoordnum[mid] == n):
+            return False
+        ids.append((mid, model.geom(tm.name).id))
+    R = np.zeros(9)
+    for tm, (mid, gid) in zip(meshes, ids, strict=True):
+        mujoco.mju_quat2Mat(R, model.geom_quat[gid])
+        rot, p, n = R.reshape(3, 3), model.geom_pos[gid], len(tm.verts)
+        va, na, ta = model.mesh_vertadr[mid], model.mesh_normaladr[mid], model.mesh_texcoordadr[mid]
+        model.mesh_vert[va : va + n] = (tm.verts - p) @ rot
+        model.mesh_normal[na : na + n] = tm.normals @ rot
+        model.mesh_texcoord[ta : ta + n] = tm.uv
+    return True

@@ -166,6 +166,12 @@ class RoverSim:
             self._spec, self._spec_version = self._build_spec(None), self.terrain_version
         return self._spec
 
+    def window_texture_rgb(self) -> np.ndarray | None:
+        """The painted terrain texture of the current streamed window (None: not streamed, or no painter)."""
+        if self.streamer is None or self._texture_fn is None:
+            return None
+        return self._texture_fn(self.terrain)
+
     def _set_terrain_lookups(self) -> None:
         terrain = self.terrain
         self._mat_list = np.asarray(terrain.materials, dtype=int).tolist()
