@@ -7,7 +7,11 @@ hours, during which the sun moved (issue #16 item 4) and the sol's time budget r
 
 :class:`MissionClock` accounts for it: the pipeline ``charge``s each activity as it happens (driving with the
 physics time it took) and anything that depends on the time of day (the sun's direction, the drive budget) reads
-``local_solar_time_h`` or ``elapsed_s``. No randomness; the same run gives the same clock.
+``local_solar_time_h`` or ``drive_s``. No randomness; the same run gives the same clock.
+
+A drive of several sols (issue #18) sleeps overnight: :meth:`MissionClock.sleep_until` charges the night as
+``sleeping`` up to the next sol's wake-up time. Sleeping moves the time of day (and so the sun) but is not drive
+time: ``drive_s`` (what a sol's drive-time budget counts) sums driving, imaging and computing only.
 """
 
 from __future__ import annotations
@@ -15,8 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-Activity = Literal["driving", "imaging", "computing"]
-ACTIVITIES: tuple[Activity, ...] = ("driving", "imaging", "computing")
+Activity = Literal["driving", "imaging", "computing", "sleeping"]
+DRIVE_ACTIVITIES: tuple[Activity, ...] = ("driving", "imaging", "computing")  # the drive-time budget's
+ACTIVITIES: tuple[Activity, ...] = (*DRIVE_ACTIVITIES, "sleeping")
 
 SECONDS_PER_SOL = 88775.244  # one Mars solar day
 VO_STEP_COMPUTE_S = 160.0  # seed 000: 2-3 min per VO update on the MER flight computer
@@ -46,16 +51,44 @@ class MissionClock:
 
     @property
     def elapsed_s(self) -> float:
+        """Mission time since the start, sleeping included (what the time of day follows)."""
         return float(sum(self.by_activity_s.values()))
+
+    @property
+    def drive_s(self) -> float:
+        """Drive time since the start: driving + imaging + computing (sleeping excluded)."""
+        return float(sum(self.by_activity_s[a] for a in DRIVE_ACTIVITIES))
+
+    @property
+    def _hours_since_start_day_h(self) -> float:
+        """Mars hours since the local midnight before the start."""
+        return self.start_local_solar_time_h + 24.0 * self.elapsed_s / SECONDS_PER_SOL
 
     @property
     def local_solar_time_h(self) -> float:
         """Local (true) solar time in Mars hours (1/24 sol), wrapping at 24."""
-        return (self.start_local_solar_time_h + 24.0 * self.elapsed_s / SECONDS_PER_SOL) % 24.0
+        return self._hours_since_start_day_h % 24.0
+
+    @property
+    def sol_index(self) -> int:
+        """Local midnights passed since the start (0 on the first day)."""
+        return int((self._hours_since_start_day_h + 1e-9) // 24.0)  # a wake at 0 h is on the new sol
+
+    def sleep_until(self, wake_local_solar_time_h: float) -> float:
+        """Sleep to ``wake_local_solar_time_h`` of the next sol (after the next local midnight): charge the night
+        as ``sleeping`` and return its length, s."""
+        if not 0.0 <= wake_local_solar_time_h < 24.0:
+            raise ValueError(f"wake_local_solar_time_h must be in [0, 24), got {wake_local_solar_time_h}")
+        wake_h = 24.0 * (self.sol_index + 1) + wake_local_solar_time_h
+        seconds = (wake_h - self._hours_since_start_day_h) * SECONDS_PER_SOL / 24.0
+        self.charge("sleeping", seconds)
+        return seconds
 
     def summary(self) -> dict[str, float]:
-        """Seconds by activity plus the total and the local solar time at the end (for ``metrics.json``)."""
-        out = {f"{a}_s": round(self.by_activity_s[a], 3) for a in ACTIVITIES}
-        out["total_s"] = round(self.elapsed_s, 3)
+        """Seconds by activity, the drive-time total (``total_s``, sleeping excluded) and the local solar time at
+        the end (for ``metrics.json``)."""
+        out = {f"{a}_s": round(self.by_activity_s[a], 3) for a in DRIVE_ACTIVITIES}
+        out["total_s"] = round(self.drive_s, 3)
+        out["sleeping_s"] = round(self.by_activity_s["sleeping"], 3)
         out["local_solar_time_h"] = round(self.local_solar_time_h, 4)
         return out

@@ -10,6 +10,8 @@ Per 8 Hz tick (:meth:`Mission.tick`): sensors -> Observation -> onboard dead rec
 the estimates, contacts) -> keep-out check on the onboard pose -> recording.
 VO (:meth:`Mission.vo_update`): the rover stops every ``nav.vo_step_m`` of commanded travel, takes a stereo pair
 and runs one VO step; an accepted motion replaces the dead-reckoned increment since the previous pair.
+A drive of several sols (:meth:`Mission.sleep`): a sol whose budget is spent skips its remaining commands up to the
+next ``sleep``, which parks the rover overnight and starts the next sol.
 """
 
 from __future__ import annotations
@@ -34,7 +36,7 @@ from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
 from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
 from rover_sim.mission.pointing import seek_texture
 from rover_sim.mission.rover_shape import rover_shape
-from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, TurnCmd
+from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, SleepCmd, TurnCmd
 from rover_sim.mission.sol import BudgetSpent, SolBudget
 from rover_sim.mission.world import World
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
@@ -120,6 +122,7 @@ class Mission:
         self.interrupted: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM (errors.Terminated) stopped the run
         self.step = 0
         self.autonav_stats = None  # set by rover_sim.mission.autonav when the scenario uses autonav
+        self._autonav_runs: list = []  # the stats of each autonav command run (several in a drive of several sols)
         # public hooks (sinks): exporters, surveys and user code subscribe; none may change the run
         self.vo_listeners: list[Callable[[VoStep, np.ndarray], None]] = []  # (step, T_rover_cam of the pair)
         self.tick_listeners: list[Callable[[Observation, Pose], None]] = []  # (sensor data, truth) at 8 Hz
@@ -163,9 +166,21 @@ class Mission:
             self.tick(self.sim)
             if self.onboard.vo is not None:
                 self.vo_update()  # the first pair initialises VO
+            skipping = False  # the sol's budget is spent: its remaining commands are skipped up to the next sleep
             for i, cmd in enumerate(self.sc.commands):
+                if skipping and not isinstance(cmd, SleepCmd):
+                    self.event(f"command {i}: {cmd.type} skipped (the sol's budget is spent)")
+                    continue
+                skipping = False
                 self.event(f"command {i}: {cmd.type}")
-                self.run_command(cmd)
+                try:
+                    self.run_command(cmd)
+                except BudgetSpent as b:
+                    if not any(isinstance(c, SleepCmd) for c in self.sc.commands[i + 1 :]):
+                        raise  # the last sol: the drive is over
+                    self.event(f"sol {self.sol.current.number}: {b}")  # type: ignore[union-attr]
+                    self.sim.hold()  # parked where the budget ran out, until the sleep
+                    skipping = True
         except BudgetSpent as b:  # the day's drive is over: an outcome, not a halt
             self.event(f"sol: {b}")
         except Halt as h:
@@ -203,7 +218,15 @@ class Mission:
         elif isinstance(cmd, AutonavCmd):
             from rover_sim.mission.autonav import run_autonav  # autonav drives this class: imported at use
 
-            run_autonav(self, cmd)
+            try:
+                run_autonav(self, cmd)
+            finally:  # also when a sol's budget cut it short
+                stats = self.autonav_stats
+                self._autonav_runs.append(stats)
+                if self.sol is not None and stats is not None:
+                    self.sol.note_autonav(stats.cycles, stats.backtracks, stats.outcome)
+        elif isinstance(cmd, SleepCmd):
+            self.sleep(cmd)
 
     # ------------------------------------------------------------------ commands
     def execute(self, prim: Primitive) -> None:
@@ -241,6 +264,29 @@ class Mission:
                 self.vo_update()
             else:  # flat ground: no VO pair (MER); the next VO step on a slope starts afresh
                 self.onboard.reset_vo()
+
+    def sleep(self, cmd: SleepCmd) -> None:
+        """End of sol: park with the wheels held and sleep to the next sol's wake-up time (issue #18).
+
+        No physics is stepped overnight: a parked MER does not move (its wheel drives hold), and the wheel-soil law
+        holds a parked rover on the plains, so the rover stays where it stopped; simulation time does not advance.
+        The mission clock advances to the wake-up time (charged as ``sleeping``, not drive time: the next sol's
+        budgets start at the wake-up) and a moving sun (``sun.local_solar_time_h``) is moved to it. Onboard
+        estimates are kept: dead reckoning keeps its pose (nothing moved, and no 8 Hz tick is missed since
+        simulation time stands still); VO forgets its last pair (next morning's pair, under another sun, starts a
+        new VO sequence, as each sol's drive did); autonav starts each command with an empty map anyway.
+        """
+        assert self.sol is not None  # the scenario refuses a sleep without a [sol] table
+        self.sim.hold()
+        self.world.sync_clock()
+        ended = self.sol.current.number
+        slept_s = self.sol.sleep(self.sc.wake_local_solar_time_h(cmd))
+        if self.sc.sun.local_solar_time_h is not None:
+            self.world.move_sun()
+        if self.onboard.vo is not None:
+            self.onboard.reset_vo()
+        lst = self.world.clock.local_solar_time_h  # type: ignore[union-attr]
+        self.event(f"sol {ended} over: slept {slept_s:.0f} s; sol {ended + 1} wakes at {lst:.2f} h local solar time")
 
     def goto(self, cmd: GotoCmd) -> None:
         """Drive to (x, y) on the onboard pose: turn toward the goal, drive a VO step, repeat (Sol 304 style)."""
@@ -462,14 +508,16 @@ class Mission:
         if clock is not None:  # only with a moving sun (sun.local_solar_time_h): other metrics stay as they were
             extra["clock"] = clock
         timing: dict = {}
-        if self.autonav_stats is not None:
+        runs = self._autonav_runs if len(self._autonav_runs) > 1 else [self.autonav_stats]
+        if runs[-1] is not None:  # several autonav commands (several sols): cycles summed, the last outcome
             extra["autonav"] = {
-                "cycles": self.autonav_stats.cycles,
-                "backtracks": self.autonav_stats.backtracks,
-                "outcome": self.autonav_stats.outcome,
+                "cycles": sum(r.cycles for r in runs),
+                "backtracks": sum(r.backtracks for r in runs),
+                "outcome": runs[-1].outcome,
             }
-            if self.autonav_stats.cycle_ms:
-                timing["autonav_cycle_ms_median"] = round(float(np.median(self.autonav_stats.cycle_ms)), 1)
+            cycle_ms = [ms for r in runs for ms in r.cycle_ms]
+            if cycle_ms:
+                timing["autonav_cycle_ms_median"] = round(float(np.median(cycle_ms)), 1)
         timing["realtime_factor"] = round(self.sim.time_s / max(wall_s, 1e-9), 1)
         if self.sol is not None:
             extra["sol"] = self.sol.summary()

@@ -1,8 +1,9 @@
 """Scenario files: one TOML schema, validated on load with errors naming the file, the field and the allowed range.
 
 A scenario is the terrain recipe, the sun, the rover's start pose, the command sequence as MER was commanded
-(blind drives, arcs, turns, VO-corrected goto, autonav to a waypoint, mast pointing), keep-out zones and a slip
-limit, the navigation configuration, and the pass criterion. ``--set dotted.key=value`` overrides any field.
+(blind drives, arcs, turns, VO-corrected goto, autonav to a waypoint, mast pointing, sleep to the next sol),
+keep-out zones and a slip limit, the navigation configuration, and the pass criterion. ``--set dotted.key=value``
+overrides any field.
 """
 
 from __future__ import annotations
@@ -244,7 +245,20 @@ class MastCmd(_Spec):
     tilt_deg: float = Field(ge=-70.0, le=85.0, description="Elevation: negative looks down.")
 
 
-Command = Annotated[DriveCmd | ArcCmd | TurnCmd | GotoCmd | AutonavCmd | MastCmd, Field(discriminator="type")]
+class SleepCmd(_Spec):
+    """End of sol (issue #18): the rover parks, wheels held, and sleeps until the next sol's wake-up time on the
+    mission clock; the next sol's budgets start then. Needs a ``[sol]`` table."""
+
+    type: Literal["sleep"]
+    wake_local_solar_time_h: float | None = Field(
+        None, ge=0.0, lt=24.0,
+        description="Local solar time the rover wakes at, next sol (default: the time of day the drive started).",
+    )  # fmt: skip
+
+
+Command = Annotated[
+    DriveCmd | ArcCmd | TurnCmd | GotoCmd | AutonavCmd | MastCmd | SleepCmd, Field(discriminator="type")
+]
 
 
 class KeepOut(_Spec):
@@ -282,10 +296,12 @@ class PassSpec(_Spec):
 class SolSpec(_Spec):
     """``[sol]``: the day's drive as MER flew it (issue #18): the commands run until the drive-time budget (mission
     clock: driving + imaging + computing, ``rover_sim/mission/clock.py``) or the odometry distance budget is spent.
-    Long drives keep fewer poses (``pose_stride``) so memory and the recording grow slowly with distance."""
+    A drive of several sols separates them with ``sleep`` commands: the budgets apply to each sol, and a sol whose
+    budget is spent skips the rest of its commands up to the next ``sleep``. Long drives keep fewer poses
+    (``pose_stride``) so memory and the recording grow slowly with distance."""
 
-    max_time_s: float = Field(gt=0.0, le=86400.0, description="Drive-time budget on the mission clock, s.")
-    max_distance_m: float | None = Field(None, gt=0.0, le=5000.0, description="Odometry distance budget, m.")
+    max_time_s: float = Field(gt=0.0, le=86400.0, description="Drive-time budget of each sol on the mission clock, s.")
+    max_distance_m: float | None = Field(None, gt=0.0, le=5000.0, description="Odometry budget of each sol, m.")
     start_local_solar_time_h: float = Field(11.0, ge=0.0, lt=24.0, description="Local solar time at the start.")
     pose_stride: int = Field(1, ge=1, le=64, description="Ticks (8 Hz) between kept poses and logged poses.")
     vo_min_slope_deg: float | None = Field(
@@ -352,6 +368,33 @@ class Scenario(_Spec):
                 f"(|x| <= {half_x:.1f}, |y| <= {half_y:.1f})"
             )
         return self
+
+    @model_validator(mode="after")
+    def _sleep_needs_a_sol(self) -> Scenario:
+        for i, cmd in enumerate(self.commands):
+            if not isinstance(cmd, SleepCmd):
+                continue
+            if self.sol is None:
+                raise ValueError(f"commands.{i}: a 'sleep' command needs a [sol] table (the mission clock and budgets)")
+            wake_h = self.wake_local_solar_time_h(cmd)
+            if self.sun.local_solar_time_h is not None:  # a moving sun: the rover must wake in daylight
+                el = sun_azimuth_elevation_deg(self.sun.latitude_deg, self.sun.solar_longitude_deg, wake_h)[1]
+                if el < MIN_SUN_ELEVATION_DEG:
+                    raise ValueError(
+                        f"commands.{i}.wake_local_solar_time_h = {wake_h}: the sun is {el:.1f} deg high; choose a "
+                        f"time with it >= {MIN_SUN_ELEVATION_DEG} deg"
+                    )
+        return self
+
+    def wake_local_solar_time_h(self, cmd: SleepCmd) -> float:
+        """When ``cmd`` wakes the rover: its own time, else the time of day the drive started (the mission clock's
+        start: ``sun.local_solar_time_h`` if set, else ``[sol] start_local_solar_time_h``)."""
+        if cmd.wake_local_solar_time_h is not None:
+            return cmd.wake_local_solar_time_h
+        if self.sun.local_solar_time_h is not None:
+            return self.sun.local_solar_time_h
+        assert self.sol is not None
+        return self.sol.start_local_solar_time_h
 
     def resolved_dict(self) -> dict[str, Any]:
         d = json.loads(self.model_dump_json(by_alias=True))

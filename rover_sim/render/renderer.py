@@ -438,6 +438,7 @@ class StereoRenderer:
         self.sim = sim
         self.lens = lens or IdentityLens()  # the true lenses (flight profile): raw images from a wider pinhole view
         self.world = RenderWorld(sim, self.config, self.lens.max_render_px)
+        self._sun_direction_world: np.ndarray | None = None  # set_sun's sun, kept across a streamed window's rebuild
         self.shadows = self.config.shadows and sim.sun.shadows  # switch per render: ``renderer.shadows = False``
         self._renderers: dict[int, mujoco.Renderer] = {}
         self._rng = np.random.default_rng(self.config.noise.seed) if self.config.noise else None
@@ -479,7 +480,8 @@ class StereoRenderer:
 
     def set_sun(self, direction_world: np.ndarray) -> None:
         """Point the sun along unit ``direction_world`` (the way sunlight travels) for the next renders."""
-        self.world.model.light_dir[self.world.sun_id] = np.asarray(direction_world, dtype=float)
+        self._sun_direction_world = np.asarray(direction_world, dtype=float).copy()
+        self.world.model.light_dir[self.world.sun_id] = self._sun_direction_world
 
     def set_ground_texture(self, texture_rgb: np.ndarray) -> None:
         """Replace the terrain texture (same size; ``terrain_texture`` layout) in the model and every GL context."""
@@ -511,6 +513,8 @@ class StereoRenderer:
             if not follow_window(self.world, contexts, self.sim.window_texture_rgb()):
                 self.close()
                 self.world = RenderWorld(self.sim, self.config, self.lens.max_render_px)
+                if self._sun_direction_world is not None:  # a moved sun (mission clock): not the model's start sun
+                    self.world.model.light_dir[self.world.sun_id] = self._sun_direction_world
         w = self.world
         w.ruts.refresh(list(self._renderers.values()))  # no-op without [physics] deformable
         w.sync()
