@@ -29,6 +29,11 @@ from rover_sim.mission.onboard import (  # noqa: F401 (re-exported for callers o
 )
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
 
+# A sol's drive logs every cycle's hazcam pair but the cycle's detail (depth image, stereo points, goodness map,
+# arc votes: ~100 kB of the ~125 kB a cycle) only every SOL_DETAIL_EVERY-th cycle and on boxed-in cycles, so a
+# kilometre with a thousand-odd cycles stays under 150 MB (issue #18); the viewer shows the latest detail logged.
+SOL_DETAIL_EVERY = 4
+
 if TYPE_CHECKING:
     from rover_sim.mission.observation import Observation
     from rover_sim.mission.pipeline import Mission
@@ -98,7 +103,8 @@ def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
         stats.cycle_ms.append(cycle.ms)
         stats.cycles += 1
         stats.last_decision = decision
-        _log_cycle(mission, obs, cycle, onboard.planner.arcs)  # type: ignore[union-attr]
+        detail = mission.sc.sol is None or decision.arc is None or (stats.cycles - 1) % SOL_DETAIL_EVERY == 0
+        _log_cycle(mission, obs, cycle, onboard.planner.arcs, detail)  # type: ignore[union-attr]
         if decision.arc is None:
             # Boxed in: retrace the last step (ground already driven over is known safe) and look again with
             # the obstacles now in the map; give up after MAX_BACKTRACKS.
@@ -128,12 +134,18 @@ def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
     return stats
 
 
-def _log_cycle(mission: Mission, obs: Observation, cycle: PlanCycle, arcs: list[GestaltArc]) -> None:
+def _log_cycle(
+    mission: Mission, obs: Observation, cycle: PlanCycle, arcs: list[GestaltArc], detail: bool = True
+) -> None:
+    """The cycle's rectified pair; with ``detail`` also its range (depth image, points), goodness map and votes."""
     rec, t, step = mission.rec, mission.sim.time_s, mission.step
     pair = mission.onboard.rectified(obs, HAZCAM)
     T_world_rover = cycle.T_world_rover
     decision = cycle.decision
-    rec.log_stereo_images(HAZCAM, t, step, pair.left_u8, pair.right_u8, cycle.range_image.disparity_px)
+    disparity = cycle.range_image.disparity_px if detail else None
+    rec.log_stereo_images(HAZCAM, t, step, pair.left_u8, pair.right_u8, disparity)
+    if not detail:
+        return
     rec.log_points("stereo", t, step, cycle.points_world)
     w = getattr(decision, "window", None)
     if w is not None:
