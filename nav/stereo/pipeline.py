@@ -116,6 +116,7 @@ class _Pipeline:
         )
         self.ok, self.ok2, self.ok3, self.ok2x, self.ok4 = (u8() for _ in range(5))
         self.lo, self.hi = f32(), f32()
+        self.lo_col, self.hi_col = np.empty((shape[0], 1), np.float32), np.empty((shape[0], 1), np.float32)
         self.fixed, self.fixed2 = np.empty(shape, np.int16), np.empty(shape, np.int16)
         self.nan = np.full(shape, np.nan, np.float32)
         self.minus16 = np.full(shape, -16, np.int16)
@@ -217,8 +218,9 @@ class _Pipeline:
         ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
         scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
         lo, hi = self.lo[rows], self.hi[rows]
-        np.copyto(lo, (window.lo[rows] + 1)[:, None])  # indices and curvatures are integers: lo + 1 <= index <= hi - 1
-        np.copyto(hi, (window.hi[rows] - 1)[:, None])
+        # indices and curvatures are integers: lo + 1 <= index <= hi - 1 (per-row bounds: float32 columns broadcast)
+        np.copyto(lo, np.add(window.lo[rows, None], 1, out=self.lo_col[rows], casting="unsafe"))
+        np.copyto(hi, np.subtract(window.hi[rows, None], 1, out=self.hi_col[rows], casting="unsafe"))
         cv2.inRange(index, lo, hi, dst=ok)
         cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
         hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side

@@ -311,19 +311,23 @@ def _row_bands(window: RowWindow, num_disparities: int, merge_gap: int = 40) -> 
     h_px = window.lo.size
     if not window.lo.any() and (window.hi == num_disparities - 1).all():  # the full window: every row
         return [[(0, h_px)] for _ in range(num_disparities)]
-    i = np.arange(num_disparities)[:, None]
-    inside = np.zeros((num_disparities, window.lo.size + 2), np.int8)
-    inside[:, 1:-1] = (window.lo[None, :] <= i) & (i <= window.hi[None, :])
-    change = np.diff(inside, axis=1)  # +1 where a band starts, -1 one past where it ends
-    starts_i, starts_v = np.nonzero(change > 0)
-    _, ends_v = np.nonzero(change < 0)
+    i, n_v = np.arange(num_disparities)[:, None], h_px + 1
+    inside = np.zeros((num_disparities, h_px + 2), bool)
+    np.less_equal(window.lo, i, out=inside[:, 1:-1])
+    inside[:, 1:-1] &= i <= window.hi
+    # runs in (disparity, row) order: where a run starts, and one past where it ends
+    starts_i, starts_v = np.divmod(np.flatnonzero(inside[:, 1:] > inside[:, :-1]), n_v)
+    ends_v = np.flatnonzero(inside[:, 1:] < inside[:, :-1]) % n_v
     bands: list[list[tuple[int, int]]] = [[] for _ in range(num_disparities)]
-    for k, a, b in zip(starts_i.tolist(), starts_v.tolist(), ends_v.tolist(), strict=True):
-        runs = bands[k]
-        if runs and a - runs[-1][1] <= merge_gap:
-            runs[-1] = (runs[-1][0], b)
-        else:
-            runs.append((a, b))
+    if starts_i.size == 0:
+        return bands
+    # a run opens a new band unless it follows a run of the same disparity at most merge_gap rows before
+    opens = np.ones(starts_i.size, bool)
+    opens[1:] = (starts_i[1:] != starts_i[:-1]) | (starts_v[1:] - ends_v[:-1] > merge_gap)
+    first = np.flatnonzero(opens)
+    last = np.append(first[1:] - 1, starts_i.size - 1)
+    for k, a, b in zip(starts_i[first].tolist(), starts_v[first].tolist(), ends_v[last].tolist(), strict=True):
+        bands[k].append((a, b))
     return bands
 
 
