@@ -189,18 +189,18 @@ class Engine:
                 best_right,
                 rolling,
             ) = view
-            for a, b in runs:
+            for a, b in runs:  # (positional arguments: OpenCV parses keywords more slowly)
                 r0, r1, n = max(a - hw, 0), min(b + hw, h_px), b - a
-                absdiff(left[r0:r1], right[r0:r1], dst=diff_out[r0 + hw : r1 + hw])
-                integral(diff_in[a : b + 2 * hw], sum=integ[: n + 2 * hw + 1], sdepth=sdepth)
-                subtract(integ_hi[:n], integ[:n], dst=band[:n])  # sums over `window_px` rows
+                absdiff(left[r0:r1], right[r0:r1], diff_out[r0 + hw : r1 + hw])
+                integral(diff_in[a : b + 2 * hw], integ[: n + 2 * hw + 1], sdepth)
+                subtract(integ_hi[:n], integ[:n], band[:n])  # sums over `window_px` rows
                 key = costs[a:b]
-                add_weighted(band_hi[:n], 1.0, band_lo[:n], -1.0, tag, dst=key, dtype=f32)  # ... and columns, tagged
+                add_weighted(band_hi[:n], 1.0, band_lo[:n], -1.0, tag, key, f32)  # ... and columns, tagged
                 best_c, second_c = best[a:b], second[a:b]
-                vmin(second_c, vmax(best_c, key, dst=tmp[:n]), dst=second_c)
-                vmin(best_c, key, dst=best_c)
+                vmin(second_c, vmax(best_c, key, tmp[:n]), second_c)
+                vmin(best_c, key, best_c)
                 right_c = best_right[a:b]
-                vmin(right_c, key, dst=right_c)
+                vmin(right_c, key, right_c)
                 if rolling is not None:
                     _carry_neighbours(key, rolling, a, b)
             if rolling is not None and last is not None:  # the previous disparity's "updated" is consumed: clear it
