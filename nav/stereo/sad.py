@@ -63,7 +63,9 @@ class Engine:
             )
         self.rolling = num_disparities * h_px * w_px * 4 > VOLUME_BUDGET_BYTES
         n_planes = 2 if self.rolling else num_disparities  # rolling: the keys of the last two disparities
-        self.costs = np.full((n_planes, h_px, w_px), NO_MATCH, np.float32)
+        # (a NO_MATCH plane before and after: the keys at index -+ 1 are read with one map, see scores)
+        self.costs_padded = np.full((n_planes + 2, h_px, w_px), NO_MATCH, np.float32)
+        self.costs = self.costs_padded[1:-1]
         if self.rolling:  # running overall best, its neighbours' keys, and "best updated here" of the last two
             self.best_run = np.empty(shape, np.float32)
             self.minus_run = np.empty(shape, np.float32)
@@ -83,8 +85,6 @@ class Engine:
         self.band = np.empty((h_px, w_px + hw + 1), depth)
         self.window = RowWindow.full(h_px, num_disparities)
         self.u_grid, self.v_grid = grids(shape)
-        if not self.rolling and h_px * num_disparities < 32000:  # (scores: rows of index -+ 1 in costs)
-            self.v_minus, self.v_plus = self.v_grid - h_px, self.v_grid + h_px
         f32, u8 = (lambda: np.empty(shape, np.float32)), (lambda: np.empty(shape, np.uint8))
         self.best_all, self.cost, self.index, self.right_index = f32(), f32(), f32(), f32()
         self.rows, self.key_minus, self.key_plus, self.cost_minus, self.cost_plus = f32(), f32(), f32(), f32(), f32()
@@ -220,16 +220,16 @@ class Engine:
         """
         rows = slice(v0, v1)
         self.rows_decoded = rows
-        best01 = cv2.min(self.best[0, rows], self.best[1, rows], dst=self.best01[rows])
-        best = cv2.min(best01, self.best[2, rows], dst=self.best_all[rows])
+        best01 = cv2.min(self.best[0, rows], self.best[1, rows], self.best01[rows])
+        best = cv2.min(best01, self.best[2, rows], self.best_all[rows])
         cost = np.floor(best, out=self.cost[rows])
         # (key - SAD) * TAG: both products are exact, so is their difference (an integer < 2^24)
-        index = cv2.addWeighted(best, float(TAG), cost, -float(TAG), 0.0, dst=self.index[rows])
+        index = cv2.addWeighted(best, float(TAG), cost, -float(TAG), 0.0, self.index[rows])
         best_right = self.best_right[rows]
         right = np.floor(best_right, out=self.right_index[rows])
-        right = cv2.addWeighted(best_right, float(TAG), right, -float(TAG), 0.0, dst=right)
-        none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, dst=self.mask_tmp[rows])
-        cv2.subtract(right, 1.0, dst=right, mask=none)
+        right = cv2.addWeighted(best_right, float(TAG), right, -float(TAG), 0.0, right)
+        none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, self.mask_tmp[rows])
+        cv2.subtract(right, 1.0, right, none)
         return index, right
 
     def found(self) -> np.ndarray:
@@ -250,17 +250,12 @@ class Engine:
             np.copyto(key_minus, self.minus_run[sl])
             np.copyto(key_plus, self.plus_run[sl])
         elif h_px * n < 32000:  # remap converts coordinates to int16
-            stacked = self.costs.reshape(n * h_px, w_px)
-            for key, v_shifted in ((key_minus, self.v_minus), (key_plus, self.v_plus)):
-                cv2.remap(
-                    stacked,
-                    self.u_grid[sl],
-                    cv2.scaleAdd(index, float(h_px), v_shifted[sl], dst=far_tmp),  # row of index -+ 1 in costs
-                    cv2.INTER_NEAREST,
-                    dst=key,
-                    borderMode=cv2.BORDER_CONSTANT,
-                    borderValue=NO_MATCH,
-                )
+            # row index * H + v of the padded volume holds the key at (index - 1, v); 2 H rows further, (index + 1, v)
+            rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], stack_row)
+            stacked = self.costs_padded.reshape(-1, w_px)
+            border = cv2.BORDER_CONSTANT
+            for key, src in ((key_minus, stacked), (key_plus, stacked[2 * h_px :])):
+                cv2.remap(src, self.u_grid[sl], rows, cv2.INTER_NEAREST, key, border, NO_MATCH)
         else:
             rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], dst=stack_row)  # row of (index, v) in costs
             flat = rows.astype(np.int64) * w_px + np.arange(w_px)
@@ -274,20 +269,18 @@ class Engine:
         # winner's key, then mid and top: the far minimum among them is mid unless mid is a neighbour's key, else
         # top unless top is; the class seconds are always candidates.
         b0, b1, b2 = self.best[0, sl], self.best[1, sl], self.best[2, sl]
-        top = cv2.max(b0, b1, dst=far_tmp)
-        mid = cv2.max(self.best01[sl], cv2.min(top, b2, dst=stack_row), dst=stack_row)
-        cv2.max(top, b2, dst=top)
+        top = cv2.max(b0, b1, far_tmp)
+        mid = cv2.max(self.best01[sl], cv2.min(top, b2, stack_row), stack_row)
+        cv2.max(top, b2, top)
         near, tmp_mask = self.mask[sl], self.mask_tmp[sl]
         for cand in (top, mid):
-            cv2.compare(cand, key_minus, cv2.CMP_EQ, dst=near)
-            cv2.bitwise_or(near, cv2.compare(cand, key_plus, cv2.CMP_EQ, dst=tmp_mask), dst=near)
-            if cand is top:
-                cv2.copyTo(self.no_match[sl], near, top)
-            else:
-                cv2.copyTo(mid, cv2.bitwise_not(near, dst=near), top)
-        far = cv2.min(self.second[0, sl], self.second[1, sl], dst=self.far[sl])
-        cv2.min(far, self.second[2, sl], dst=far)
-        cv2.min(far, top, dst=far)
+            cv2.compare(cand, key_minus, cv2.CMP_EQ, near)
+            cv2.bitwise_or(near, cv2.compare(cand, key_plus, cv2.CMP_EQ, tmp_mask), near)
+            # top: NO_MATCH where near; mid: top where near (the candidate: mid, else top, else none)
+            cv2.copyTo(self.no_match[sl] if cand is top else top, near, cand)
+        far = cv2.min(self.second[0, sl], self.second[1, sl], self.far[sl])
+        cv2.min(far, self.second[2, sl], far)
+        cv2.min(far, mid, far)
         return self.cost[sl], cost_minus, cost_plus, np.floor(far, out=far)
 
 
