@@ -75,14 +75,19 @@ class Engine:
         self.second = np.empty((3, h_px, w_px), np.float32)  # second-best key per class
         self.best_right = np.empty(shape, np.float32)  # best key per right pixel
         self.tmp = np.empty(shape, np.float32)
-        # |L - R| with hw zero rows above and below and hw zero columns on the right: windows there are clipped
-        self.diff = np.zeros((h_px + 2 * hw, w_px + hw), np.uint8)
-        # float32 integral images are exact below 2^24
-        exact = (h_px + 2 * hw + 1) * (w_px + hw + 1) * max_value < 2**24
-        depth = np.float32 if exact else np.int32
+        # |L - R| of the bands of several disparities stacked (see search), each with hw rows more above and below
+        # (zero outside the image) and hw zero columns on the right: windows there are clipped. float32 integral
+        # images are exact below 2^24 (the whole stack's sum), else int32 (exact to 2^31).
+        band_rows = h_px + 2 * hw  # a band's stacked rows: at most the whole image's
+        n_stack = max(num_disparities, 1) * band_rows
+        rows_f32 = (2**24 - 1) // ((w_px + hw + 1) * max_value) - 1
+        exact = rows_f32 >= band_rows
+        self.stack_rows = min(rows_f32, n_stack) if exact else max(band_rows, min(4096, n_stack))
         self.sdepth = cv2.CV_32F if exact else cv2.CV_32S
-        self.integral = np.empty((h_px + 2 * hw + 1, w_px + hw + 1), depth)
-        self.band = np.empty((h_px, w_px + hw + 1), depth)
+        depth = np.float32 if exact else np.int32
+        self.stack = np.zeros((self.stack_rows, w_px + hw), np.uint8)
+        self.integral = np.empty((self.stack_rows + 1, w_px + hw + 1), depth)
+        self.band = np.empty((self.stack_rows, w_px + hw + 1), depth)
         self.window = RowWindow.full(h_px, num_disparities)
         self.u_grid, self.v_grid = grids(shape)
         f32, u8 = (lambda: np.empty(shape, np.float32)), (lambda: np.empty(shape, np.uint8))
@@ -98,7 +103,7 @@ class Engine:
         """Per disparity: its shift, tag and the column slices of every buffer it touches (row-sliced per band)."""
         h_px, w_px = self.shape
         hw, win = self.window_px // 2, self.window_px
-        views = []
+        views: list[tuple] = []
         for i in range(self.num_disparities):
             s = self.min_disparity + i
             n_cols = w_px - s - hw  # left pixels u in [s + hw, w_px) have their window inside the right image
@@ -106,21 +111,14 @@ class Engine:
                 break
             c = i % 3
             plane = i % 2 if self.rolling else i
-            integ = self.integral[:, : w_px + hw - s + 1]
-            band = self.band[:, : w_px + hw - s + 1]
             views.append(
                 (
                     s,
                     i / TAG,
                     self.left_q[:, s:],
                     self.right_q[:, : w_px - s],
-                    self.diff[:, s:w_px],
-                    self.diff[:, s:],
-                    integ,
-                    integ[win:],
-                    band,
-                    band[:, win:],
-                    band[:, :n_cols],
+                    self.band[:, s + win :],
+                    self.band[:, s : s + n_cols],
                     self.costs[plane, :, s + hw :],
                     self.best[c, :, s + hw :],
                     self.second[c, :, s + hw :],
@@ -155,7 +153,6 @@ class Engine:
         decode only these rows).
         """
         h_px = self.shape[0]
-        hw = self.window_px // 2
         self.window = window = window if window is not None else RowWindow.full(h_px, self.num_disparities)
         v0, v1 = rows if rows is not None else (0, h_px)
         self.best[:, v0:v1].fill(NO_MATCH)
@@ -165,37 +162,22 @@ class Engine:
             for buf in (self.best_run, self.minus_run, self.plus_run):
                 buf[v0:v1].fill(NO_MATCH)
             self.updated[:, v0:v1].fill(0)
-        absdiff, integral, subtract, add_weighted = cv2.absdiff, cv2.integral, cv2.subtract, cv2.addWeighted
-        vmin, vmax, f32, sdepth = cv2.min, cv2.max, cv2.CV_32F, self.sdepth
+        add_weighted, vmin, vmax, f32 = cv2.addWeighted, cv2.min, cv2.max, cv2.CV_32F
+        bands = list(zip(self.views, _row_bands(window, self.num_disparities), strict=False))
+        runs_all = [(view, a, b) for view, runs in bands for a, b in runs]
+        offsets: list[int] = []  # each run's first row in the stack (filled a stack at a time)
         last = None
+        k = 0
         # (views stop at the first disparity with no column left in the image)
-        for view, runs in zip(self.views, _row_bands(window, self.num_disparities), strict=False):
-            (
-                s,
-                tag,
-                left,
-                right,
-                diff_out,
-                diff_in,
-                integ,
-                integ_hi,
-                band,
-                band_hi,
-                band_lo,
-                costs,
-                best,
-                second,
-                tmp,
-                best_right,
-                rolling,
-            ) = view
-            for a, b in runs:  # (positional arguments: OpenCV parses keywords more slowly)
-                r0, r1, n = max(a - hw, 0), min(b + hw, h_px), b - a
-                absdiff(left[r0:r1], right[r0:r1], diff_out[r0 + hw : r1 + hw])
-                integral(diff_in[a : b + 2 * hw], integ[: n + 2 * hw + 1], sdepth)
-                subtract(integ_hi[:n], integ[:n], band[:n])  # sums over `window_px` rows
-                key = costs[a:b]
-                add_weighted(band_hi[:n], 1.0, band_lo[:n], -1.0, tag, key, f32)  # ... and columns, tagged
+        for view, runs in bands:
+            _, tag, _, _, band_hi, band_lo, costs, best, second, tmp, best_right, rolling = view
+            for a, b in runs:
+                if k == len(offsets):
+                    self._stack_runs(runs_all, k, offsets)
+                off, n = offsets[k], b - a
+                k += 1
+                key = costs[a:b]  # (positional arguments: OpenCV parses keywords more slowly)
+                add_weighted(band_hi[off : off + n], 1.0, band_lo[off : off + n], -1.0, tag, key, f32)  # tagged
                 best_c, second_c = best[a:b], second[a:b]
                 vmin(second_c, vmax(best_c, key, tmp[:n]), second_c)
                 vmin(best_c, key, best_c)
@@ -211,6 +193,35 @@ class Engine:
             _, _, _, plus, updated, _, _, _, _ = last[0]
             for a, b in last[1]:
                 cv2.copyTo(self.no_match[a:b, : plus.shape[1]], updated[a:b], plus[a:b])
+
+    def _stack_runs(self, runs: list[tuple], k0: int, offsets: list[int]) -> None:
+        """|L - R| of runs ``k0, k0 + 1, ...`` (as many as the stack holds), each with hw rows more above and below,
+        stacked; then one integral image and one subtraction give the sums over ``window_px`` rows of all of them
+        (row ``offsets[k] + j`` of ``band``: run k's row a + j). A column sum never mixes two runs. The columns
+        left of a run's shift are zeroed, so its row sums are the same numbers as from an integral image starting at
+        the shift: ``addWeighted`` then rounds them the same way (its SIMD path adds ``gamma`` to ``-band_lo`` first,
+        which drops tag bits once ``band_lo`` passes 2^16; the keys must stay bit-identical to the per-band loop's)."""
+        h_px, w_px = self.shape
+        hw, win = self.window_px // 2, self.window_px
+        stack, absdiff = self.stack, cv2.absdiff
+        row = 0
+        for view, a, b in runs[k0:]:
+            n_rows = b - a + 2 * hw
+            if row + n_rows > self.stack_rows:
+                break
+            s, left, right = view[0], view[2], view[3]
+            r0, r1 = max(a - hw, 0), min(b + hw, h_px)
+            top, bottom = row + r0 - (a - hw), row + r1 - (a - hw)
+            absdiff(left[r0:r1], right[r0:r1], stack[top:bottom, s:w_px])
+            stack[top:bottom, :s].fill(0)  # (the window sums then equal a per-run integral's, see below)
+            if top > row:  # rows above the image
+                stack[row:top].fill(0)
+            if bottom < row + n_rows:  # ... and below
+                stack[bottom : row + n_rows].fill(0)
+            offsets.append(row)
+            row += n_rows
+        integ = cv2.integral(stack[:row], self.integral[: row + 1], self.sdepth)
+        cv2.subtract(integ[win:], integ[: row + 1 - win], self.band[: row + 1 - win])
 
     def winners(self, v0: int = 0, v1: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel (-1 if none),
