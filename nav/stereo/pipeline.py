@@ -13,7 +13,7 @@ import numpy as np
 
 from nav.camera import PinholeCamera, StereoRig
 from nav.stereo.bandpass import bandpass_into, quantise_gain, quantise_into, texture_into
-from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle, uniqueness
+from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle_filter, uniqueness
 from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
 from nav.stereo.sad import Engine, subpixel
 
@@ -22,6 +22,7 @@ MAX_SIDE_PX = 4096  # images up to this side (larger ones: bin them; the SAD eng
 _CURVATURE_LIMIT = float(2**19)
 _COARSE_SCALE = 4  # row_search_window matches the images binned 4x4 (two pyrDown)
 _COARSE_MIN_VOTES = 8  # a disparity must be found this many times near a row to enter its search window
+_NONE_INDEX = -3.0  # the coarse right index where a right pixel has no winner (fails a 1 px left-right test)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -161,8 +162,8 @@ class _Pipeline:
         quantise_into(left_c, params, coarse.left_q)
         quantise_into(right_c, params, coarse.right_q)
         coarse.search(None)
-        index, right_index = coarse.winners()
-        ok = left_right(index, right_index, 1, 0, self.ok_c, self.scratch_c, self.scratch_c2, self.ok_c2)
+        index, right_index = coarse.winners(none_index=_NONE_INDEX)
+        ok = left_right(index, right_index, 1, 0, self.ok_c, self.scratch_c, self.scratch_c2, self.ok_c2, _NONE_INDEX)
         # uniqueness over the whole range (the full-resolution search sees only the row's window)
         cost, cost_minus, cost_plus, second = coarse.scores(index)
         subpixel(cost_minus, cost, cost_plus, self.curvature_c, self.offset_c)
@@ -200,17 +201,21 @@ class _Pipeline:
         bp_right = bandpass_into(right_u8, params, self.bp_right, self.scratch)
         window = self.row_window(bp_left, bp_right)  # 2. row windows
         searched = np.nonzero(window.lo <= window.hi)[0]
-        disparity = np.full(self.shape, np.nan, np.float32)  # the result: a fresh array
+        disparity = np.empty(self.shape, np.float32)  # the result: a fresh array
         if searched.size == 0:
+            disparity.fill(np.nan)
             return disparity
         v0, v1 = int(searched[0]), int(searched[-1]) + 1  # everything below works on these rows only
+        disparity[:v0].fill(np.nan)
+        disparity[v1:].fill(np.nan)
         rows = slice(v0, v1)
         engine = self.engine  # 3. SAD
         gain_left = quantise_gain(bp_left, params)
         quantise_into(bp_left, params, engine.left_q, gain_left)
         quantise_into(bp_right, params, engine.right_q)
         engine.search(window, (v0, v1))
-        index, right_index = engine.winners(v0, v1)
+        none_index = -float(params.lr_max_diff_px + 2)  # (fails the left-right test by itself)
+        index, right_index = engine.winners(v0, v1, none_index)
         cost, cost_minus, cost_plus, second = engine.scores(index)
         curvature, offset = self.curvature[rows], self.offset[rows]
         subpixel(cost_minus, cost, cost_plus, curvature, offset)  # 4. sub-pixel
@@ -234,7 +239,7 @@ class _Pipeline:
             cv2.bitwise_and(ok, cv2.compare(cost, limit, cv2.CMP_LE, dst=tmp), dst=ok)
         cv2.bitwise_and(ok, uniqueness(cost, second, curvature, params.uniqueness_ratio, tmp, scratch), dst=ok)
         cv2.bitwise_and(
-            ok, left_right(index, right_index, params.lr_max_diff_px, 0, tmp, scratch, scratch2, tmp2), dst=ok
+            ok, left_right(index, right_index, params.lr_max_diff_px, 0, tmp, scratch, scratch2, tmp2, none_index), ok
         )
         out = disparity[rows]
         cv2.add(index, offset, dst=out)
@@ -248,8 +253,10 @@ class _Pipeline:
             cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
         if params.speckle_window_size > 0:  # 6. blob filter
             cv2.copyTo(self.minus16[rows], bad, fixed)
-            keep = speckle(fixed, params, tmp)
-            cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
+            # afterwards -16 marks exactly the pixels failed so far and the removed blobs (a valid disparity is
+            # >= 0.5 px: the winner lies strictly inside its window, index >= 1, and |sub-pixel offset| <= 0.5)
+            speckle_filter(fixed, params)
+            cv2.compare(fixed, -16, cv2.CMP_EQ, bad)
         cv2.copyTo(self.nan[rows], bad, out)
         return disparity
 

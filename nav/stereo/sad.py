@@ -223,9 +223,9 @@ class Engine:
         integ = cv2.integral(stack[:row], self.integral[: row + 1], self.sdepth)
         cv2.subtract(integ[win:], integ[: row + 1 - win], self.band[: row + 1 - win])
 
-    def winners(self, v0: int = 0, v1: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel (-1 if none),
-        on rows ``v0:v1`` (views of workspace buffers).
+    def winners(self, v0: int = 0, v1: int | None = None, none_index: float = -1.0) -> tuple[np.ndarray, np.ndarray]:
+        """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel
+        (``none_index`` if none), on rows ``v0:v1`` (views of workspace buffers).
 
         A key's index is its fractional part times 256 (exact: SAD < 2^16 and 8 fractional bits fit in float32).
         """
@@ -240,7 +240,7 @@ class Engine:
         right = np.floor(best_right, out=self.right_index[rows])
         right = cv2.addWeighted(best_right, float(TAG), right, -float(TAG), 0.0, right)
         none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, self.mask_tmp[rows])
-        cv2.subtract(right, 1.0, right, none)
+        cv2.subtract(right, -none_index, right, none)  # (the decoded index is 0 there)
         return index, right
 
     def found(self) -> np.ndarray:
