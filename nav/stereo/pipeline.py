@@ -141,8 +141,12 @@ class _Pipeline:
             n_bins = params.num_disparities + 2
             # the coarse rows a full-resolution row's SAD window touches
             v, hw = np.arange(shape[0]), params.half_window_px
-            self.vote_lo = np.clip((v - hw) // f, 0, shape_c[0])
-            self.vote_hi = np.clip((v + hw) // f + 1, 0, shape_c[0])
+            vote_lo = np.clip((v - hw) // f, 0, shape_c[0])
+            vote_hi = np.clip((v + hw) // f + 1, 0, shape_c[0])
+            # (rows share these ranges about f at a time: the votes are counted once per distinct range)
+            pairs, self.vote_row = np.unique(np.stack([vote_lo, vote_hi], axis=1), axis=0, return_inverse=True)
+            self.vote_row = self.vote_row.reshape(-1)
+            self.vote_lo, self.vote_hi = pairs[:, 0], pairs[:, 1]
             self.row_bins = np.repeat((np.arange(shape_c[0], dtype=np.int32) * n_bins)[:, None], shape_c[1], axis=1)
             self.cum = np.zeros((shape_c[0] + 1, n_bins), np.int64)
 
@@ -184,16 +188,17 @@ class _Pipeline:
         h_c = coarse.shape[0]
         cum = self.cum
         np.cumsum(np.bincount(bins.ravel(), minlength=h_c * n_bins).reshape(h_c, n_bins), axis=0, out=cum[1:])
-        found = (cum[self.vote_hi] - cum[self.vote_lo]) >= _COARSE_MIN_VOTES  # (H, bins): disparities near each row
+        found = (cum[self.vote_hi] - cum[self.vote_lo]) >= _COARSE_MIN_VOTES  # (ranges, bins): disparities near
         found[:, 0] = False
         d_max = params.num_disparities - 1
-        first = np.argmax(found, axis=1)  # 0 where nothing matched near the row (bin 0 is never found)
+        first = np.argmax(found, axis=1)  # 0 where nothing matched near the rows (bin 0 is never found)
         lo = first - (1 + params.row_window_margin_px)  # bin b holds index b - 1
         hi = (n_bins - 2 + params.row_window_margin_px) - np.argmax(found[:, ::-1], axis=1)
         np.maximum(lo, 0, out=lo)
         np.minimum(hi, d_max, out=hi)
-        hi[first == 0] = -1  # nothing matched near this row: not searched
-        return RowWindow(np.minimum(lo, d_max).astype(np.int32), hi.astype(np.int32))
+        hi[first == 0] = -1  # nothing matched near these rows: not searched
+        np.minimum(lo, d_max, out=lo)
+        return RowWindow(lo.astype(np.int32)[self.vote_row], hi.astype(np.int32)[self.vote_row])
 
     def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
         params, h_px = self.params, self.shape[0]
