@@ -240,7 +240,7 @@ class Engine:
         right = np.floor(best_right, out=self.right_index[rows])
         right = cv2.addWeighted(best_right, float(TAG), right, -float(TAG), 0.0, right)
         none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, self.mask_tmp[rows])
-        cv2.subtract(right, -none_index, right, none)  # (the decoded index is 0 there)
+        cv2.copyTo(_constant_f32(self.shape, none_index)[rows], none, right)
         return index, right
 
     def found(self) -> np.ndarray:
@@ -348,6 +348,20 @@ def grids(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
 
 
 _GRIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _constant_f32(shape: tuple[int, int], value: float) -> np.ndarray:
+    """A read-only float32 image filled with ``value`` (kept per shape and value)."""
+    arr = _CONSTANTS.get((shape, value))
+    if arr is None:
+        if len(_CONSTANTS) >= 16:
+            _CONSTANTS.clear()
+        arr = _CONSTANTS[(shape, value)] = np.full(shape, value, np.float32)
+        arr.flags.writeable = False
+    return arr
+
+
+_CONSTANTS: dict[tuple, np.ndarray] = {}
 
 
 # ----------------------------------------------------------------------------------------------------------------
