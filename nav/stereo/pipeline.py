@@ -228,10 +228,11 @@ class _Pipeline:
         ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
         scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
         lo, hi = self.lo[rows], self.hi[rows]
-        # indices and curvatures are integers: lo + 1 <= index <= hi - 1 (per-row bounds: float32 columns broadcast)
+        # indices and curvatures are integers: lo + 1 <= index <= hi - 1 (per-row bounds: float32 columns broadcast;
+        # two compares: inRange with array bounds takes twice as long)
         np.copyto(lo, np.add(window.lo[rows, None], 1, out=self.lo_col[rows], casting="unsafe"))
         np.copyto(hi, np.subtract(window.hi[rows, None], 1, out=self.hi_col[rows], casting="unsafe"))
-        cv2.inRange(index, lo, hi, dst=ok)
+        cv2.bitwise_and(cv2.compare(index, lo, cv2.CMP_GE, ok), cv2.compare(index, hi, cv2.CMP_LE, tmp), ok)
         cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
         hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side
         t0, t1 = max(v0 - hw, 0), min(v1 + hw, h_px)
