@@ -35,9 +35,14 @@ class Engine:
     Searches whose volume exceeds ``VOLUME_BUDGET_BYTES`` keep two key planes instead and carry the keys at
     ``winner - 1`` and ``winner + 1`` along with the running winner (``rolling``; same results where they count).
 
-    Exact at any size: window sums come from integral images, float32 where the whole image's sum stays below 2^24,
-    else int32 (exact to 2^31), and the window's row sums (below ``window_px * (W + hw) * max_value``, checked to be
-    < 2^24) are what is converted to float32.
+    The window sums are exact at any size: they come from integral images (of the stacked bands of several
+    disparities, see :meth:`search`), float32 where the whole stack's sum stays below 2^24, else int32 (exact to
+    2^31), and the window's row sums (below ``window_px * (W + hw) * max_value``, checked to be < 2^24) are what is
+    converted to float32. Known limitation (not yet fixed, kept bit-identical): the key is formed by one
+    ``addWeighted(band_hi, 1, band_lo, -1, tag)``, whose SIMD path adds ``tag`` to ``-band_lo`` first and so rounds
+    the tag once ``band_lo`` (a row sum up to the column) passes 2^16; about 5 % of the keys of the 1024^2
+    ``bench stereo`` searches carry the index of a neighbouring disparity (none at 256^2). Forming the key with an
+    exact subtraction and then adding the tag fixes it.
     """
 
     def __init__(
