@@ -87,7 +87,7 @@ class Engine:
         n_stack = max(num_disparities, 1) * band_rows
         rows_f32 = (2**24 - 1) // ((w_px + hw + 1) * max_value) - 1
         exact = rows_f32 >= band_rows
-        self.stack_rows = min(rows_f32, n_stack) if exact else max(band_rows, min(4096, n_stack))
+        self.stack_rows = min(rows_f32, n_stack) if exact else max(band_rows, min(2048, n_stack))
         self.sdepth = cv2.CV_32F if exact else cv2.CV_32S
         depth = np.float32 if exact else np.int32
         self.stack = np.zeros((self.stack_rows, w_px + hw), np.uint8)
