@@ -32,18 +32,20 @@ Implementation: the SAD engine is ours rather than ``cv2.StereoBM`` because Ster
 (needed for the quadratic fit: its own sub-pixel step is an equiangular fit quantised to 1/16 px) nor the
 right-referenced disparities, and cannot search a different range on each row (using it for the search would also
 take a second full StereoBM run, on flipped images, for the left-right check). For each disparity, only the band of
-rows that search it is processed: one ``absdiff``, one ``integral`` and two subtractions (the window sum from the
-integral image), then a running max and three running minima, all inside OpenCV; the score and the disparity index
-share one float32 ``key = SAD + index / 256`` so one ``min`` tracks both the best score and its argmin. Windows are
-clipped at the top, bottom and right image borders (the same pixels for every disparity, so the scores stay
-comparable); on the left the window must lie inside the right image. Everything after the search is a few dozen
-OpenCV calls on the searched rows, written into buffers kept between calls (:class:`_Pipeline`; a fresh 256 KB
-array costs page faults that take longer than the call filling it). On the 256x256 hazcam pairs of
-``rover-sim bench stereo`` (32 disparities) a call takes about 2.3 ms, 1.2-1.4 times OpenCV's StereoBM on the same
-machine: the coarse search and row windows about 0.45 ms, the full-resolution search 0.65 ms, the rest post-processing
-(the blob filter alone 0.15-0.25 ms). Any size up to 4096 px a side is exact (window sums in int32 where float32
-would round; the SAD volume is replaced by the scores beside each running winner when it would exceed 64 MB), e.g.
-full-resolution 1024x1024 navcam pairs, 741x500 or 640x480 (Rocky 8) images.
+rows that search it is processed: its ``absdiff`` goes into a stack shared by the bands of many disparities, one
+``integral`` and one subtraction per stack give every band's sums over the window's rows, then per band one
+``addWeighted`` (the sums over the window's columns), a running max and three running minima, all inside OpenCV; the
+score and the disparity index share one float32 ``key = SAD + index / 256`` so one ``min`` tracks both the best score
+and its argmin. Windows are clipped at the top, bottom and right image borders (the same pixels for every disparity,
+so the scores stay comparable); on the left the window must lie inside the right image. Everything after the search
+is a few dozen OpenCV calls on the searched rows, written into buffers kept between calls (:class:`_Pipeline`; a
+fresh 256 KB array costs page faults that take longer than the call filling it). On the 256x256 hazcam pairs of
+``rover-sim bench stereo`` (32 disparities) a call takes 1.8-1.9 times OpenCV's StereoBM in the same process on a
+shared 2-core machine (load 2-3): the full-resolution search about a third of it, band-pass, coarse search, SAD
+score read-back and blob filter about a tenth each. Any size up to 4096 px a side runs (window sums in int32 where
+float32 would round; the SAD volume is replaced by the scores beside each running winner when it would exceed the
+budget), e.g. full-resolution 1024x1024 navcam pairs, 741x500 or 640x480 (Rocky 8) images; the keys of large images
+are not all exact yet (see :class:`nav.stereo.sad.Engine`).
 
 Modules, in the order of the steps: :mod:`nav.stereo.params` (parameters and result types),
 :mod:`nav.stereo.bandpass` (step 1, and the texture check), :mod:`nav.stereo.sad` (the SAD engine, step 3, and

@@ -99,15 +99,20 @@ def left_right(
     scratch: np.ndarray,
     back: np.ndarray,
     scratch_u8: np.ndarray,
+    none_index: float = -1.0,
 ) -> np.ndarray:
-    """index, right_index float32 (right -1 where none); the left index must be >= 0 (checked elsewhere)."""
+    """index, right_index float32 (right ``none_index`` where none); the left index must be >= 0 (checked
+    elsewhere). With ``none_index < -max_diff_px`` a right pixel without a winner (or outside the image) fails the
+    difference test by itself, and the separate ``back >= 0`` test is skipped (the same mask, two calls fewer)."""
     u_grid, v_grid = grids(index.shape)
-    map_u = cv2.subtract(u_grid, index, dst=scratch)
+    map_u = cv2.subtract(u_grid, index, scratch)
     if min_disparity:
-        cv2.subtract(map_u, float(min_disparity), dst=map_u)
-    cv2.remap(right_index, map_u, v_grid, cv2.INTER_NEAREST, dst=back, borderMode=cv2.BORDER_CONSTANT, borderValue=-1.0)
-    ok = cv2.compare(cv2.absdiff(back, index, dst=scratch), float(max_diff_px), cv2.CMP_LE, dst=out)
-    return cv2.bitwise_and(ok, cv2.compare(back, 0.0, cv2.CMP_GE, dst=scratch_u8), dst=ok)
+        cv2.subtract(map_u, float(min_disparity), map_u)
+    cv2.remap(right_index, map_u, v_grid, cv2.INTER_NEAREST, back, cv2.BORDER_CONSTANT, none_index)
+    ok = cv2.compare(cv2.absdiff(back, index, scratch), float(max_diff_px), cv2.CMP_LE, out)
+    if none_index < -max_diff_px:
+        return ok
+    return cv2.bitwise_and(ok, cv2.compare(back, 0.0, cv2.CMP_GE, scratch_u8), ok)
 
 
 def edge_mask(search: SadSearch) -> np.ndarray:
@@ -205,5 +210,10 @@ def speckle_mask(disparity_px: np.ndarray, params: StereoParams = StereoParams()
 
 def speckle(fixed: np.ndarray, params: StereoParams, out: np.ndarray) -> np.ndarray:
     """``fixed``: the disparity in 1/16 px (int16), -16 where invalid; overwritten."""
-    cv2.filterSpeckles(fixed, -16, params.speckle_window_size, int(round(params.speckle_range_px * 16)))
+    speckle_filter(fixed, params)
     return cv2.compare(fixed, -16, cv2.CMP_NE, dst=out)
+
+
+def speckle_filter(fixed: np.ndarray, params: StereoParams) -> None:
+    """:func:`speckle` in place: the pixels of removed blobs become -16."""
+    cv2.filterSpeckles(fixed, -16, params.speckle_window_size, int(round(params.speckle_range_px * 16)))

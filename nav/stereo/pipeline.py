@@ -13,7 +13,7 @@ import numpy as np
 
 from nav.camera import PinholeCamera, StereoRig
 from nav.stereo.bandpass import bandpass_into, quantise_gain, quantise_into, texture_into
-from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle, uniqueness
+from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle_filter, uniqueness
 from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
 from nav.stereo.sad import Engine, subpixel
 
@@ -22,6 +22,7 @@ MAX_SIDE_PX = 4096  # images up to this side (larger ones: bin them; the SAD eng
 _CURVATURE_LIMIT = float(2**19)
 _COARSE_SCALE = 4  # row_search_window matches the images binned 4x4 (two pyrDown)
 _COARSE_MIN_VOTES = 8  # a disparity must be found this many times near a row to enter its search window
+_NONE_INDEX = -3.0  # the coarse right index where a right pixel has no winner (fails a 1 px left-right test)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -116,6 +117,7 @@ class _Pipeline:
         )
         self.ok, self.ok2, self.ok3, self.ok2x, self.ok4 = (u8() for _ in range(5))
         self.lo, self.hi = f32(), f32()
+        self.lo_col, self.hi_col = np.empty((shape[0], 1), np.float32), np.empty((shape[0], 1), np.float32)
         self.fixed, self.fixed2 = np.empty(shape, np.int16), np.empty(shape, np.int16)
         self.nan = np.full(shape, np.nan, np.float32)
         self.minus16 = np.full(shape, -16, np.int16)
@@ -139,8 +141,12 @@ class _Pipeline:
             n_bins = params.num_disparities + 2
             # the coarse rows a full-resolution row's SAD window touches
             v, hw = np.arange(shape[0]), params.half_window_px
-            self.vote_lo = np.clip((v - hw) // f, 0, shape_c[0])
-            self.vote_hi = np.clip((v + hw) // f + 1, 0, shape_c[0])
+            vote_lo = np.clip((v - hw) // f, 0, shape_c[0])
+            vote_hi = np.clip((v + hw) // f + 1, 0, shape_c[0])
+            # (rows share these ranges about f at a time: the votes are counted once per distinct range)
+            pairs, self.vote_row = np.unique(np.stack([vote_lo, vote_hi], axis=1), axis=0, return_inverse=True)
+            self.vote_row = self.vote_row.reshape(-1)
+            self.vote_lo, self.vote_hi = pairs[:, 0], pairs[:, 1]
             self.row_bins = np.repeat((np.arange(shape_c[0], dtype=np.int32) * n_bins)[:, None], shape_c[1], axis=1)
             self.cum = np.zeros((shape_c[0] + 1, n_bins), np.int64)
 
@@ -160,8 +166,8 @@ class _Pipeline:
         quantise_into(left_c, params, coarse.left_q)
         quantise_into(right_c, params, coarse.right_q)
         coarse.search(None)
-        index, right_index = coarse.winners()
-        ok = left_right(index, right_index, 1, 0, self.ok_c, self.scratch_c, self.scratch_c2, self.ok_c2)
+        index, right_index = coarse.winners(none_index=_NONE_INDEX)
+        ok = left_right(index, right_index, 1, 0, self.ok_c, self.scratch_c, self.scratch_c2, self.ok_c2, _NONE_INDEX)
         # uniqueness over the whole range (the full-resolution search sees only the row's window)
         cost, cost_minus, cost_plus, second = coarse.scores(index)
         subpixel(cost_minus, cost, cost_plus, self.curvature_c, self.offset_c)
@@ -182,16 +188,17 @@ class _Pipeline:
         h_c = coarse.shape[0]
         cum = self.cum
         np.cumsum(np.bincount(bins.ravel(), minlength=h_c * n_bins).reshape(h_c, n_bins), axis=0, out=cum[1:])
-        found = (cum[self.vote_hi] - cum[self.vote_lo]) >= _COARSE_MIN_VOTES  # (H, bins): disparities near each row
+        found = (cum[self.vote_hi] - cum[self.vote_lo]) >= _COARSE_MIN_VOTES  # (ranges, bins): disparities near
         found[:, 0] = False
         d_max = params.num_disparities - 1
-        first = np.argmax(found, axis=1)  # 0 where nothing matched near the row (bin 0 is never found)
+        first = np.argmax(found, axis=1)  # 0 where nothing matched near the rows (bin 0 is never found)
         lo = first - (1 + params.row_window_margin_px)  # bin b holds index b - 1
         hi = (n_bins - 2 + params.row_window_margin_px) - np.argmax(found[:, ::-1], axis=1)
         np.maximum(lo, 0, out=lo)
         np.minimum(hi, d_max, out=hi)
-        hi[first == 0] = -1  # nothing matched near this row: not searched
-        return RowWindow(np.minimum(lo, d_max).astype(np.int32), hi.astype(np.int32))
+        hi[first == 0] = -1  # nothing matched near these rows: not searched
+        np.minimum(lo, d_max, out=lo)
+        return RowWindow(lo.astype(np.int32)[self.vote_row], hi.astype(np.int32)[self.vote_row])
 
     def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
         params, h_px = self.params, self.shape[0]
@@ -199,17 +206,21 @@ class _Pipeline:
         bp_right = bandpass_into(right_u8, params, self.bp_right, self.scratch)
         window = self.row_window(bp_left, bp_right)  # 2. row windows
         searched = np.nonzero(window.lo <= window.hi)[0]
-        disparity = np.full(self.shape, np.nan, np.float32)  # the result: a fresh array
+        disparity = np.empty(self.shape, np.float32)  # the result: a fresh array
         if searched.size == 0:
+            disparity.fill(np.nan)
             return disparity
         v0, v1 = int(searched[0]), int(searched[-1]) + 1  # everything below works on these rows only
+        disparity[:v0].fill(np.nan)
+        disparity[v1:].fill(np.nan)
         rows = slice(v0, v1)
         engine = self.engine  # 3. SAD
         gain_left = quantise_gain(bp_left, params)
         quantise_into(bp_left, params, engine.left_q, gain_left)
         quantise_into(bp_right, params, engine.right_q)
         engine.search(window, (v0, v1))
-        index, right_index = engine.winners(v0, v1)
+        none_index = -float(params.lr_max_diff_px + 2)  # (fails the left-right test by itself)
+        index, right_index = engine.winners(v0, v1, none_index)
         cost, cost_minus, cost_plus, second = engine.scores(index)
         curvature, offset = self.curvature[rows], self.offset[rows]
         subpixel(cost_minus, cost, cost_plus, curvature, offset)  # 4. sub-pixel
@@ -217,9 +228,11 @@ class _Pipeline:
         ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
         scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
         lo, hi = self.lo[rows], self.hi[rows]
-        np.copyto(lo, (window.lo[rows] + 1)[:, None])  # indices and curvatures are integers: lo + 1 <= index <= hi - 1
-        np.copyto(hi, (window.hi[rows] - 1)[:, None])
-        cv2.inRange(index, lo, hi, dst=ok)
+        # indices and curvatures are integers: lo + 1 <= index <= hi - 1 (per-row bounds: float32 columns broadcast;
+        # two compares: inRange with array bounds takes twice as long)
+        np.copyto(lo, np.add(window.lo[rows, None], 1, out=self.lo_col[rows], casting="unsafe"))
+        np.copyto(hi, np.subtract(window.hi[rows, None], 1, out=self.hi_col[rows], casting="unsafe"))
+        cv2.bitwise_and(cv2.compare(index, lo, cv2.CMP_GE, ok), cv2.compare(index, hi, cv2.CMP_LE, tmp), ok)
         cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
         hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side
         t0, t1 = max(v0 - hw, 0), min(v1 + hw, h_px)
@@ -232,7 +245,7 @@ class _Pipeline:
             cv2.bitwise_and(ok, cv2.compare(cost, limit, cv2.CMP_LE, dst=tmp), dst=ok)
         cv2.bitwise_and(ok, uniqueness(cost, second, curvature, params.uniqueness_ratio, tmp, scratch), dst=ok)
         cv2.bitwise_and(
-            ok, left_right(index, right_index, params.lr_max_diff_px, 0, tmp, scratch, scratch2, tmp2), dst=ok
+            ok, left_right(index, right_index, params.lr_max_diff_px, 0, tmp, scratch, scratch2, tmp2, none_index), ok
         )
         out = disparity[rows]
         cv2.add(index, offset, dst=out)
@@ -246,8 +259,10 @@ class _Pipeline:
             cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
         if params.speckle_window_size > 0:  # 6. blob filter
             cv2.copyTo(self.minus16[rows], bad, fixed)
-            keep = speckle(fixed, params, tmp)
-            cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
+            # afterwards -16 marks exactly the pixels failed so far and the removed blobs (a valid disparity is
+            # >= 0.5 px: the winner lies strictly inside its window, index >= 1, and |sub-pixel offset| <= 0.5)
+            speckle_filter(fixed, params)
+            cv2.compare(fixed, -16, cv2.CMP_EQ, bad)
         cv2.copyTo(self.nan[rows], bad, out)
         return disparity
 

@@ -35,9 +35,14 @@ class Engine:
     Searches whose volume exceeds ``VOLUME_BUDGET_BYTES`` keep two key planes instead and carry the keys at
     ``winner - 1`` and ``winner + 1`` along with the running winner (``rolling``; same results where they count).
 
-    Exact at any size: window sums come from integral images, float32 where the whole image's sum stays below 2^24,
-    else int32 (exact to 2^31), and the window's row sums (below ``window_px * (W + hw) * max_value``, checked to be
-    < 2^24) are what is converted to float32.
+    The window sums are exact at any size: they come from integral images (of the stacked bands of several
+    disparities, see :meth:`search`), float32 where the whole stack's sum stays below 2^24, else int32 (exact to
+    2^31), and the window's row sums (below ``window_px * (W + hw) * max_value``, checked to be < 2^24) are what is
+    converted to float32. Known limitation (not yet fixed, kept bit-identical): the key is formed by one
+    ``addWeighted(band_hi, 1, band_lo, -1, tag)``, whose SIMD path adds ``tag`` to ``-band_lo`` first and so rounds
+    the tag once ``band_lo`` (a row sum up to the column) passes 2^16; about 5 % of the keys of the 1024^2
+    ``bench stereo`` searches carry the index of a neighbouring disparity (none at 256^2). Forming the key with an
+    exact subtraction and then adding the tag fixes it.
     """
 
     def __init__(
@@ -63,7 +68,9 @@ class Engine:
             )
         self.rolling = num_disparities * h_px * w_px * 4 > VOLUME_BUDGET_BYTES
         n_planes = 2 if self.rolling else num_disparities  # rolling: the keys of the last two disparities
-        self.costs = np.full((n_planes, h_px, w_px), NO_MATCH, np.float32)
+        # (a NO_MATCH plane before and after: the keys at index -+ 1 are read with one map, see scores)
+        self.costs_padded = np.full((n_planes + 2, h_px, w_px), NO_MATCH, np.float32)
+        self.costs = self.costs_padded[1:-1]
         if self.rolling:  # running overall best, its neighbours' keys, and "best updated here" of the last two
             self.best_run = np.empty(shape, np.float32)
             self.minus_run = np.empty(shape, np.float32)
@@ -73,18 +80,21 @@ class Engine:
         self.second = np.empty((3, h_px, w_px), np.float32)  # second-best key per class
         self.best_right = np.empty(shape, np.float32)  # best key per right pixel
         self.tmp = np.empty(shape, np.float32)
-        # |L - R| with hw zero rows above and below and hw zero columns on the right: windows there are clipped
-        self.diff = np.zeros((h_px + 2 * hw, w_px + hw), np.uint8)
-        # float32 integral images are exact below 2^24
-        exact = (h_px + 2 * hw + 1) * (w_px + hw + 1) * max_value < 2**24
-        depth = np.float32 if exact else np.int32
+        # |L - R| of the bands of several disparities stacked (see search), each with hw rows more above and below
+        # (zero outside the image) and hw zero columns on the right: windows there are clipped. float32 integral
+        # images are exact below 2^24 (the whole stack's sum), else int32 (exact to 2^31).
+        band_rows = h_px + 2 * hw  # a band's stacked rows: at most the whole image's
+        n_stack = max(num_disparities, 1) * band_rows
+        rows_f32 = (2**24 - 1) // ((w_px + hw + 1) * max_value) - 1
+        exact = rows_f32 >= band_rows
+        self.stack_rows = min(rows_f32, n_stack) if exact else max(band_rows, min(2048, n_stack))
         self.sdepth = cv2.CV_32F if exact else cv2.CV_32S
-        self.integral = np.empty((h_px + 2 * hw + 1, w_px + hw + 1), depth)
-        self.band = np.empty((h_px, w_px + hw + 1), depth)
+        depth = np.float32 if exact else np.int32
+        self.stack = np.zeros((self.stack_rows, w_px + hw), np.uint8)
+        self.integral = np.empty((self.stack_rows + 1, w_px + hw + 1), depth)
+        self.band = np.empty((self.stack_rows, w_px + hw + 1), depth)
         self.window = RowWindow.full(h_px, num_disparities)
         self.u_grid, self.v_grid = grids(shape)
-        if not self.rolling and h_px * num_disparities < 32000:  # (scores: rows of index -+ 1 in costs)
-            self.v_minus, self.v_plus = self.v_grid - h_px, self.v_grid + h_px
         f32, u8 = (lambda: np.empty(shape, np.float32)), (lambda: np.empty(shape, np.uint8))
         self.best_all, self.cost, self.index, self.right_index = f32(), f32(), f32(), f32()
         self.rows, self.key_minus, self.key_plus, self.cost_minus, self.cost_plus = f32(), f32(), f32(), f32(), f32()
@@ -98,7 +108,7 @@ class Engine:
         """Per disparity: its shift, tag and the column slices of every buffer it touches (row-sliced per band)."""
         h_px, w_px = self.shape
         hw, win = self.window_px // 2, self.window_px
-        views = []
+        views: list[tuple] = []
         for i in range(self.num_disparities):
             s = self.min_disparity + i
             n_cols = w_px - s - hw  # left pixels u in [s + hw, w_px) have their window inside the right image
@@ -106,21 +116,14 @@ class Engine:
                 break
             c = i % 3
             plane = i % 2 if self.rolling else i
-            integ = self.integral[:, : w_px + hw - s + 1]
-            band = self.band[:, : w_px + hw - s + 1]
             views.append(
                 (
                     s,
                     i / TAG,
                     self.left_q[:, s:],
                     self.right_q[:, : w_px - s],
-                    self.diff[:, s:w_px],
-                    self.diff[:, s:],
-                    integ,
-                    integ[win:],
-                    band,
-                    band[:, win:],
-                    band[:, :n_cols],
+                    self.band[:, s + win :],
+                    self.band[:, s : s + n_cols],
                     self.costs[plane, :, s + hw :],
                     self.best[c, :, s + hw :],
                     self.second[c, :, s + hw :],
@@ -155,7 +158,6 @@ class Engine:
         decode only these rows).
         """
         h_px = self.shape[0]
-        hw = self.window_px // 2
         self.window = window = window if window is not None else RowWindow.full(h_px, self.num_disparities)
         v0, v1 = rows if rows is not None else (0, h_px)
         self.best[:, v0:v1].fill(NO_MATCH)
@@ -165,42 +167,27 @@ class Engine:
             for buf in (self.best_run, self.minus_run, self.plus_run):
                 buf[v0:v1].fill(NO_MATCH)
             self.updated[:, v0:v1].fill(0)
-        absdiff, integral, subtract, add_weighted = cv2.absdiff, cv2.integral, cv2.subtract, cv2.addWeighted
-        vmin, vmax, f32, sdepth = cv2.min, cv2.max, cv2.CV_32F, self.sdepth
+        add_weighted, vmin, vmax, f32 = cv2.addWeighted, cv2.min, cv2.max, cv2.CV_32F
+        bands = list(zip(self.views, _row_bands(window, self.num_disparities), strict=False))
+        runs_all = [(view, a, b) for view, runs in bands for a, b in runs]
+        offsets: list[int] = []  # each run's first row in the stack (filled a stack at a time)
         last = None
+        k = 0
         # (views stop at the first disparity with no column left in the image)
-        for view, runs in zip(self.views, _row_bands(window, self.num_disparities), strict=False):
-            (
-                s,
-                tag,
-                left,
-                right,
-                diff_out,
-                diff_in,
-                integ,
-                integ_hi,
-                band,
-                band_hi,
-                band_lo,
-                costs,
-                best,
-                second,
-                tmp,
-                best_right,
-                rolling,
-            ) = view
+        for view, runs in bands:
+            _, tag, _, _, band_hi, band_lo, costs, best, second, tmp, best_right, rolling = view
             for a, b in runs:
-                r0, r1, n = max(a - hw, 0), min(b + hw, h_px), b - a
-                absdiff(left[r0:r1], right[r0:r1], dst=diff_out[r0 + hw : r1 + hw])
-                integral(diff_in[a : b + 2 * hw], sum=integ[: n + 2 * hw + 1], sdepth=sdepth)
-                subtract(integ_hi[:n], integ[:n], dst=band[:n])  # sums over `window_px` rows
-                key = costs[a:b]
-                add_weighted(band_hi[:n], 1.0, band_lo[:n], -1.0, tag, dst=key, dtype=f32)  # ... and columns, tagged
+                if k == len(offsets):
+                    self._stack_runs(runs_all, k, offsets)
+                off, n = offsets[k], b - a
+                k += 1
+                key = costs[a:b]  # (positional arguments: OpenCV parses keywords more slowly)
+                add_weighted(band_hi[off : off + n], 1.0, band_lo[off : off + n], -1.0, tag, key, f32)  # tagged
                 best_c, second_c = best[a:b], second[a:b]
-                vmin(second_c, vmax(best_c, key, dst=tmp[:n]), dst=second_c)
-                vmin(best_c, key, dst=best_c)
+                vmin(second_c, vmax(best_c, key, tmp[:n]), second_c)
+                vmin(best_c, key, best_c)
                 right_c = best_right[a:b]
-                vmin(right_c, key, dst=right_c)
+                vmin(right_c, key, right_c)
                 if rolling is not None:
                     _carry_neighbours(key, rolling, a, b)
             if rolling is not None and last is not None:  # the previous disparity's "updated" is consumed: clear it
@@ -212,24 +199,53 @@ class Engine:
             for a, b in last[1]:
                 cv2.copyTo(self.no_match[a:b, : plus.shape[1]], updated[a:b], plus[a:b])
 
-    def winners(self, v0: int = 0, v1: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel (-1 if none),
-        on rows ``v0:v1`` (views of workspace buffers).
+    def _stack_runs(self, runs: list[tuple], k0: int, offsets: list[int]) -> None:
+        """|L - R| of runs ``k0, k0 + 1, ...`` (as many as the stack holds), each with hw rows more above and below,
+        stacked; then one integral image and one subtraction give the sums over ``window_px`` rows of all of them
+        (row ``offsets[k] + j`` of ``band``: run k's row a + j). A column sum never mixes two runs. The columns
+        left of a run's shift are zeroed, so its row sums are the same numbers as from an integral image starting at
+        the shift: ``addWeighted`` then rounds them the same way (its SIMD path adds ``gamma`` to ``-band_lo`` first,
+        which drops tag bits once ``band_lo`` passes 2^16; the keys must stay bit-identical to the per-band loop's)."""
+        h_px, w_px = self.shape
+        hw, win = self.window_px // 2, self.window_px
+        stack, absdiff = self.stack, cv2.absdiff
+        row = 0
+        for view, a, b in runs[k0:]:
+            n_rows = b - a + 2 * hw
+            if row + n_rows > self.stack_rows:
+                break
+            s, left, right = view[0], view[2], view[3]
+            r0, r1 = max(a - hw, 0), min(b + hw, h_px)
+            top, bottom = row + r0 - (a - hw), row + r1 - (a - hw)
+            absdiff(left[r0:r1], right[r0:r1], stack[top:bottom, s:w_px])
+            stack[top:bottom, :s].fill(0)  # (the window sums then equal a per-run integral's, see below)
+            if top > row:  # rows above the image
+                stack[row:top].fill(0)
+            if bottom < row + n_rows:  # ... and below
+                stack[bottom : row + n_rows].fill(0)
+            offsets.append(row)
+            row += n_rows
+        integ = cv2.integral(stack[:row], self.integral[: row + 1], self.sdepth)
+        cv2.subtract(integ[win:], integ[: row + 1 - win], self.band[: row + 1 - win])
+
+    def winners(self, v0: int = 0, v1: int | None = None, none_index: float = -1.0) -> tuple[np.ndarray, np.ndarray]:
+        """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel
+        (``none_index`` if none), on rows ``v0:v1`` (views of workspace buffers).
 
         A key's index is its fractional part times 256 (exact: SAD < 2^16 and 8 fractional bits fit in float32).
         """
         rows = slice(v0, v1)
         self.rows_decoded = rows
-        best01 = cv2.min(self.best[0, rows], self.best[1, rows], dst=self.best01[rows])
-        best = cv2.min(best01, self.best[2, rows], dst=self.best_all[rows])
+        best01 = cv2.min(self.best[0, rows], self.best[1, rows], self.best01[rows])
+        best = cv2.min(best01, self.best[2, rows], self.best_all[rows])
         cost = np.floor(best, out=self.cost[rows])
         # (key - SAD) * TAG: both products are exact, so is their difference (an integer < 2^24)
-        index = cv2.addWeighted(best, float(TAG), cost, -float(TAG), 0.0, dst=self.index[rows])
+        index = cv2.addWeighted(best, float(TAG), cost, -float(TAG), 0.0, self.index[rows])
         best_right = self.best_right[rows]
         right = np.floor(best_right, out=self.right_index[rows])
-        right = cv2.addWeighted(best_right, float(TAG), right, -float(TAG), 0.0, dst=right)
-        none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, dst=self.mask_tmp[rows])
-        cv2.subtract(right, 1.0, dst=right, mask=none)
+        right = cv2.addWeighted(best_right, float(TAG), right, -float(TAG), 0.0, right)
+        none = cv2.compare(best_right, NO_MATCH, cv2.CMP_GE, self.mask_tmp[rows])
+        cv2.copyTo(_constant_f32(self.shape, none_index)[rows], none, right)
         return index, right
 
     def found(self) -> np.ndarray:
@@ -250,17 +266,12 @@ class Engine:
             np.copyto(key_minus, self.minus_run[sl])
             np.copyto(key_plus, self.plus_run[sl])
         elif h_px * n < 32000:  # remap converts coordinates to int16
-            stacked = self.costs.reshape(n * h_px, w_px)
-            for key, v_shifted in ((key_minus, self.v_minus), (key_plus, self.v_plus)):
-                cv2.remap(
-                    stacked,
-                    self.u_grid[sl],
-                    cv2.scaleAdd(index, float(h_px), v_shifted[sl], dst=far_tmp),  # row of index -+ 1 in costs
-                    cv2.INTER_NEAREST,
-                    dst=key,
-                    borderMode=cv2.BORDER_CONSTANT,
-                    borderValue=NO_MATCH,
-                )
+            # row index * H + v of the padded volume holds the key at (index - 1, v); 2 H rows further, (index + 1, v)
+            rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], stack_row)
+            stacked = self.costs_padded.reshape(-1, w_px)
+            border = cv2.BORDER_CONSTANT
+            for key, src in ((key_minus, stacked), (key_plus, stacked[2 * h_px :])):
+                cv2.remap(src, self.u_grid[sl], rows, cv2.INTER_NEAREST, key, border, NO_MATCH)
         else:
             rows = cv2.scaleAdd(index, float(h_px), self.v_grid[sl], dst=stack_row)  # row of (index, v) in costs
             flat = rows.astype(np.int64) * w_px + np.arange(w_px)
@@ -274,20 +285,18 @@ class Engine:
         # winner's key, then mid and top: the far minimum among them is mid unless mid is a neighbour's key, else
         # top unless top is; the class seconds are always candidates.
         b0, b1, b2 = self.best[0, sl], self.best[1, sl], self.best[2, sl]
-        top = cv2.max(b0, b1, dst=far_tmp)
-        mid = cv2.max(self.best01[sl], cv2.min(top, b2, dst=stack_row), dst=stack_row)
-        cv2.max(top, b2, dst=top)
+        top = cv2.max(b0, b1, far_tmp)
+        mid = cv2.max(self.best01[sl], cv2.min(top, b2, stack_row), stack_row)
+        cv2.max(top, b2, top)
         near, tmp_mask = self.mask[sl], self.mask_tmp[sl]
         for cand in (top, mid):
-            cv2.compare(cand, key_minus, cv2.CMP_EQ, dst=near)
-            cv2.bitwise_or(near, cv2.compare(cand, key_plus, cv2.CMP_EQ, dst=tmp_mask), dst=near)
-            if cand is top:
-                cv2.copyTo(self.no_match[sl], near, top)
-            else:
-                cv2.copyTo(mid, cv2.bitwise_not(near, dst=near), top)
-        far = cv2.min(self.second[0, sl], self.second[1, sl], dst=self.far[sl])
-        cv2.min(far, self.second[2, sl], dst=far)
-        cv2.min(far, top, dst=far)
+            cv2.compare(cand, key_minus, cv2.CMP_EQ, near)
+            cv2.bitwise_or(near, cv2.compare(cand, key_plus, cv2.CMP_EQ, tmp_mask), near)
+            # top: NO_MATCH where near; mid: top where near (the candidate: mid, else top, else none)
+            cv2.copyTo(self.no_match[sl] if cand is top else top, near, cand)
+        far = cv2.min(self.second[0, sl], self.second[1, sl], self.far[sl])
+        cv2.min(far, self.second[2, sl], far)
+        cv2.min(far, mid, far)
         return self.cost[sl], cost_minus, cost_plus, np.floor(far, out=far)
 
 
@@ -311,19 +320,23 @@ def _row_bands(window: RowWindow, num_disparities: int, merge_gap: int = 40) -> 
     h_px = window.lo.size
     if not window.lo.any() and (window.hi == num_disparities - 1).all():  # the full window: every row
         return [[(0, h_px)] for _ in range(num_disparities)]
-    i = np.arange(num_disparities)[:, None]
-    inside = np.zeros((num_disparities, window.lo.size + 2), np.int8)
-    inside[:, 1:-1] = (window.lo[None, :] <= i) & (i <= window.hi[None, :])
-    change = np.diff(inside, axis=1)  # +1 where a band starts, -1 one past where it ends
-    starts_i, starts_v = np.nonzero(change > 0)
-    _, ends_v = np.nonzero(change < 0)
+    i, n_v = np.arange(num_disparities)[:, None], h_px + 1
+    inside = np.zeros((num_disparities, h_px + 2), bool)
+    np.less_equal(window.lo, i, out=inside[:, 1:-1])
+    inside[:, 1:-1] &= i <= window.hi
+    # runs in (disparity, row) order: where a run starts, and one past where it ends
+    starts_i, starts_v = np.divmod(np.flatnonzero(inside[:, 1:] > inside[:, :-1]), n_v)
+    ends_v = np.flatnonzero(inside[:, 1:] < inside[:, :-1]) % n_v
     bands: list[list[tuple[int, int]]] = [[] for _ in range(num_disparities)]
-    for k, a, b in zip(starts_i.tolist(), starts_v.tolist(), ends_v.tolist(), strict=True):
-        runs = bands[k]
-        if runs and a - runs[-1][1] <= merge_gap:
-            runs[-1] = (runs[-1][0], b)
-        else:
-            runs.append((a, b))
+    if starts_i.size == 0:
+        return bands
+    # a run opens a new band unless it follows a run of the same disparity at most merge_gap rows before
+    opens = np.ones(starts_i.size, bool)
+    opens[1:] = (starts_i[1:] != starts_i[:-1]) | (starts_v[1:] - ends_v[:-1] > merge_gap)
+    first = np.flatnonzero(opens)
+    last = np.append(first[1:] - 1, starts_i.size - 1)
+    for k, a, b in zip(starts_i[first].tolist(), starts_v[first].tolist(), ends_v[last].tolist(), strict=True):
+        bands[k].append((a, b))
     return bands
 
 
@@ -340,6 +353,20 @@ def grids(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
 
 
 _GRIDS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _constant_f32(shape: tuple[int, int], value: float) -> np.ndarray:
+    """A read-only float32 image filled with ``value`` (kept per shape and value)."""
+    arr = _CONSTANTS.get((shape, value))
+    if arr is None:
+        if len(_CONSTANTS) >= 16:
+            _CONSTANTS.clear()
+        arr = _CONSTANTS[(shape, value)] = np.full(shape, value, np.float32)
+        arr.flags.writeable = False
+    return arr
+
+
+_CONSTANTS: dict[tuple, np.ndarray] = {}
 
 
 # ----------------------------------------------------------------------------------------------------------------
