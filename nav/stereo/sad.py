@@ -38,11 +38,10 @@ class Engine:
     The window sums are exact at any size: they come from integral images (of the stacked bands of several
     disparities, see :meth:`search`), float32 where the whole stack's sum stays below 2^24, else int32 (exact to
     2^31), and the window's row sums (below ``window_px * (W + hw) * max_value``, checked to be < 2^24) are what is
-    converted to float32. Known limitation (not yet fixed, kept bit-identical): the key is formed by one
-    ``addWeighted(band_hi, 1, band_lo, -1, tag)``, whose SIMD path adds ``tag`` to ``-band_lo`` first and so rounds
-    the tag once ``band_lo`` (a row sum up to the column) passes 2^16; about 5 % of the keys of the 1024^2
-    ``bench stereo`` searches carry the index of a neighbouring disparity (none at 256^2). Forming the key with an
-    exact subtraction and then adding the tag fixes it.
+    converted to float32. The key is the exact window sum (one subtraction) plus the tag (one addition): a fused
+    ``addWeighted(band_hi, 1, band_lo, -1, tag)``, used before, added ``tag`` to ``-band_lo`` first in its SIMD path
+    and so rounded the tag once ``band_lo`` (a row sum up to the column) passed 2^16: about 5 % of the keys of the
+    1024^2 ``bench stereo`` searches carried a neighbouring disparity's index (none at 256^2).
     """
 
     def __init__(
@@ -167,7 +166,7 @@ class Engine:
             for buf in (self.best_run, self.minus_run, self.plus_run):
                 buf[v0:v1].fill(NO_MATCH)
             self.updated[:, v0:v1].fill(0)
-        add_weighted, vmin, vmax, f32 = cv2.addWeighted, cv2.min, cv2.max, cv2.CV_32F
+        subtract, add, vmin, vmax, f32 = cv2.subtract, cv2.add, cv2.min, cv2.max, cv2.CV_32F
         bands = list(zip(self.views, _row_bands(window, self.num_disparities), strict=False))
         runs_all = [(view, a, b) for view, runs in bands for a, b in runs]
         offsets: list[int] = []  # each run's first row in the stack (filled a stack at a time)
@@ -182,7 +181,8 @@ class Engine:
                 off, n = offsets[k], b - a
                 k += 1
                 key = costs[a:b]  # (positional arguments: OpenCV parses keywords more slowly)
-                add_weighted(band_hi[off : off + n], 1.0, band_lo[off : off + n], -1.0, tag, key, f32)  # tagged
+                subtract(band_hi[off : off + n], band_lo[off : off + n], key, None, f32)  # exact window sums ...
+                add(key, tag, key)  # ... then the tag (a fused addWeighted rounded it once band_lo passed 2^16)
                 best_c, second_c = best[a:b], second[a:b]
                 vmin(second_c, vmax(best_c, key, tmp[:n]), second_c)
                 vmin(best_c, key, best_c)
@@ -204,8 +204,7 @@ class Engine:
         stacked; then one integral image and one subtraction give the sums over ``window_px`` rows of all of them
         (row ``offsets[k] + j`` of ``band``: run k's row a + j). A column sum never mixes two runs. The columns
         left of a run's shift are zeroed, so its row sums are the same numbers as from an integral image starting at
-        the shift: ``addWeighted`` then rounds them the same way (its SIMD path adds ``gamma`` to ``-band_lo`` first,
-        which drops tag bits once ``band_lo`` passes 2^16; the keys must stay bit-identical to the per-band loop's)."""
+        the shift."""
         h_px, w_px = self.shape
         hw, win = self.window_px // 2, self.window_px
         stack, absdiff = self.stack, cv2.absdiff

@@ -164,3 +164,36 @@ def test_too_large_image_names_the_limit() -> None:
     img = np.zeros((8, side), np.uint8)
     with pytest.raises(ValueError, match=f"{side}x8 px"):
         compute_disparity(img, img)
+
+
+def test_wide_rows_keep_the_disparity_tag_exact() -> None:
+    """On 1024 px rows the running row sums pass 2^16 while the window sums stay small (the float32 path): every
+    winner, its score and its neighbours' scores equal the exact integer reference (a fused key formation once
+    rounded the disparity tag away there, giving ~5 % of the winners a neighbouring disparity)."""
+    h_px, w_px, hw, n_disp = 24, 1024, 3, 16
+    params = StereoParams(num_disparities=n_disp, window_px=2 * hw + 1)
+    rng = np.random.default_rng(21)
+    left_q = rng.integers(0, 63, (h_px, w_px), dtype=np.uint8)
+    right_q = np.roll(left_q, -6, axis=1)
+    right_q ^= (rng.random((h_px, w_px)) < 0.4).astype(np.uint8)  # noisy: the winning scores are not zero
+    assert not _engine((h_px, w_px), params).rolling
+    res = sad_search(left_q, right_q, params)
+    L, R = left_q.astype(np.int16), right_q.astype(np.int16)
+    vol = np.full((n_disp, h_px, w_px), np.inf)
+    for i in range(n_disp):
+        diff = np.zeros((h_px, w_px), np.int64)
+        diff[:, i:] = np.abs(L[:, i:] - R[:, : w_px - i])
+        cost = _exact_window_sums(diff, hw).astype(np.float64)
+        cost[:, : i + hw] = np.inf  # the window must lie inside the right image
+        vol[i] = cost
+    matched = np.isfinite(vol).any(axis=0)
+    index = np.where(matched, np.argmin(np.where(np.isfinite(vol), vol, 1e9), axis=0), -1)
+    np.testing.assert_array_equal(res.index, index)
+    v, u = np.nonzero(matched)
+    np.testing.assert_array_equal(res.cost[v, u], vol[index[v, u], v, u])
+    assert (index[matched] == 6).mean() > 0.9
+    keys = _engine((h_px, w_px), params).costs  # every stored key carries its own disparity's tag
+    for i in range(n_disp):
+        k = keys[i][keys[i] < NO_MATCH]
+        assert k.size > 0.5 * h_px * w_px
+        np.testing.assert_array_equal((k - np.floor(k)) * 256, i)
