@@ -108,6 +108,12 @@ class RoverSim:
             self._apply_soil_law = self._apply_soil_law_wr  # the default law's path stays untouched
         else:
             self.law = WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
+        n_mat = len(self.law.materials)
+        if np.size(terrain.materials) and int(np.max(terrain.materials)) >= n_mat:  # e.g. drift with the default law
+            raise ValueError(
+                f"the terrain has material code {int(np.max(terrain.materials))} but the {soil_model!r} soil law knows "
+                f"only {n_mat} materials (drift ripples need soil_model 'wong_reece')"
+            )
         m = self.model
         self._wheel_body = np.array([m.body(f"wheel_{w}").id for w in WHEELS])
         self._wheel_qadr = np.array([m.jnt_qposadr[m.joint(f"wheel_{w}").id] for w in WHEELS])
