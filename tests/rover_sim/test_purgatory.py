@@ -172,3 +172,26 @@ def test_purgatory_judged_both_ways_blind_embeds_and_the_slip_check_halts_before
     assert blind.halted is None and wb["final_sinkage_m"] >= EMBED_M and wb["final_slip_pct"] >= 90.0
     assert vo.halted == "slip_limit" and wv["final_sinkage_m"] < EMBED_M
     assert wv["final_sinkage_m"] < wb["final_sinkage_m"] - 0.02 and not math.isnan(vo.vo_error_pct)
+
+
+def test_slide_check_is_on_sustained_motion_not_a_jolt():
+    """RoverSim.safety_issue judges the net displacement over a window: a rover sliding down 45 deg of sand is
+    caught; a one-tick jolt (a wheel bumping in a deep rut) is not a slide."""
+    from rover_sim.bench.mobility import slope_terrain
+
+    sim = RoverSim(slope_terrain("sand", 45.0, size_m=(12.0, 6.0)), soil_model="wong_reece")
+    sim.place(0.0, 0.0, 0.0, settle_s=0.0)
+    issue = None
+    for _ in range(80):  # 10 s at 8 Hz
+        sim.step(None, 25)
+        issue = sim.safety_issue()
+        if issue is not None:
+            break
+    assert issue is not None and issue[0] == "slid_down_slope", issue
+    flat = RoverSim(Terrain.from_heights(np.zeros((61, 61)), 0.1), soil_model="wong_reece")
+    flat.place(0.0, 0.0, 0.0)
+    for k in range(16):
+        flat.step(None, 25)
+        if k == 8:
+            flat.data.qvel[0] = 0.5  # a jolt: half a metre per second for an instant
+        assert flat.safety_issue() is None
