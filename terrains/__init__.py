@@ -14,6 +14,7 @@ from terrains.errors import InvalidRockError, InvalidTerrainError, TerrainError,
 from terrains.recipe import (
     CraterSpec,
     Disc,
+    DriftRippleSpec,
     ExplicitRockSpec,
     MaterialSpec,
     RippleSpec,
@@ -31,6 +32,7 @@ from terrains.terrain import Material, Rock, Terrain
 __all__ = [
     "CraterSpec",
     "Disc",
+    "DriftRippleSpec",
     "ExplicitRockSpec",
     "IRREGULAR_FORMS",
     "IrregularRock",

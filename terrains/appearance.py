@@ -52,6 +52,10 @@ MIXED_SAND_DETAIL = 0.5
 MIXED_ROCK_DETAIL = 0.7
 PEBBLE_THRESHOLD = 2.2  # std units of the pebble field above which a pixel is a pebble
 PEBBLE_CONTRAST = 0.12
+# Drift (loose, fine, dust-rich: the Purgatory ripple): a little brighter than the plains' sand and smoother (its
+# grain-scale detail damped; the ripples' own relief still shades it).
+DRIFT_ALBEDO_OFFSET = 0.04
+DRIFT_SAND_DETAIL = 0.4
 
 
 class _Part(IntEnum):
@@ -139,6 +143,7 @@ class _MaterialFields:
             Material.SAND: self._sand,
             Material.BEDROCK: self._bedrock,
             Material.MIXED: self._mixed,
+            Material.DRIFT: self._drift,
         }
         if material not in self._cache:
             self._cache[material] = builders[material]().astype(np.float32)
@@ -185,6 +190,11 @@ class _MaterialFields:
         mean = 0.5 * (SAND_ALBEDO + BEDROCK_ALBEDO)
         detail = MIXED_SAND_DETAIL * (sand - SAND_ALBEDO) + MIXED_ROCK_DETAIL * (rock - BEDROCK_ALBEDO)
         return mean + detail + self.contrast * pebble
+
+
+    def _drift(self) -> np.ndarray:
+        sand = self.of(Material.SAND)
+        return SAND_ALBEDO + DRIFT_ALBEDO_OFFSET + DRIFT_SAND_DETAIL * (sand - SAND_ALBEDO)
 
 
 def rock_albedo(rock: Rock, seed: int) -> float:

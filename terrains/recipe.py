@@ -116,6 +116,30 @@ class RippleSpec(_Spec):
     )
 
 
+class DriftRippleSpec(_Spec):
+    """One ripple of loose, fine-grained drift on the ground (Opportunity's Purgatory ripple, Sol 446: about 30 cm
+    tall, a few metres wide, on the flat Meridiani plains).
+
+    Cross-section ``height_m cos^2(pi u / width_m)`` for ``|u| <= width_m / 2`` (``u`` along ``azimuth_deg``, across
+    the crest; symmetric, steepest flank ``atan(pi height / width)``), the crest ``length_m`` long with its ends
+    rounded over half a width. Cells where the drift is at least ``drift_min_thickness_m`` thick are
+    ``Material.DRIFT``; its thin margins count as the ground beneath (a wheel there sinks into the ground, not the
+    drift). Drift is a soil of the experimental Wong-Reece law only (``rover_sim/sim/terramechanics_wr.py``).
+    """
+
+    x_m: float = Field(ge=-1.0e4, le=1.0e4, description="Crest centre, east, metres.")
+    y_m: float = Field(ge=-1.0e4, le=1.0e4, description="Crest centre, north, metres.")
+    height_m: float = Field(0.3, gt=0.0, le=2.0, description="Crest height above the ground, metres.")
+    width_m: float = Field(3.0, gt=0.1, le=50.0, description="Base width across the crest, metres.")
+    length_m: float = Field(10.0, gt=0.1, le=200.0, description="Crest length, metres.")
+    azimuth_deg: float = Field(
+        0.0, ge=-360.0, le=360.0, description="Direction across the crest (from +x toward +y)."
+    )
+    drift_min_thickness_m: float = Field(
+        0.05, ge=0.0, le=2.0, description="Drift at least this thick is Material.DRIFT; thinner is the ground."
+    )
+
+
 class CraterSpec(_Spec):
     """A simple (bowl-shaped) impact crater.
 
@@ -367,6 +391,9 @@ class TerrainRecipe(_Spec):
     slope: SlopeSpec = Field(default_factory=SlopeSpec)
     roughness: RoughnessSpec = Field(default_factory=RoughnessSpec)
     ripples: RippleSpec | None = None
+    drift_ripples: list[DriftRippleSpec] = Field(
+        default_factory=list, max_length=100, description="Single ripples of loose drift (Purgatory)."
+    )
     craters: list[CraterSpec] = Field(default_factory=list)
     rocks: RockSpec = Field(default_factory=RockSpec)
     explicit_rocks: list[ExplicitRockSpec] = Field(default_factory=list)
@@ -401,6 +428,12 @@ class TerrainRecipe(_Spec):
                 f"rocks: about {expected:.0f} rocks expected (limit {MAX_EXPECTED_ROCKS}); raise "
                 "rocks.min_height_m, lower rocks.cover_fraction or shrink the patch"
             )
+        for k, d in enumerate(self.drift_ripples):
+            if abs(d.x_m) > half_x or abs(d.y_m) > half_y:
+                raise ValueError(
+                    f"drift_ripples.{k}: crest centre ({d.x_m}, {d.y_m}) lies outside the patch "
+                    f"(|x| <= {half_x}, |y| <= {half_y})"
+                )
         names: set[str] = set()
         for rock in self.explicit_rocks:
             if rock.name in names:

@@ -98,6 +98,10 @@ def synthesize(recipe: TerrainRecipe, seed: int) -> Terrain:
         )
 
     materials = material_map(landform, cell, recipe.material, layer_rng(seed, Layer.MATERIAL))
+    for d in recipe.drift_ripples:  # deterministic (no random layer): heights and the drift material
+        thickness = drift_ripple_m(xs_m, ys_m, d.x_m, d.y_m, d.height_m, d.width_m, d.length_m, d.azimuth_deg)
+        heights += thickness
+        materials[thickness >= max(d.drift_min_thickness_m, 1e-9)] = Material.DRIFT
 
     explicit = [explicit_rock(spec) for spec in recipe.explicit_rocks]
     keep_clear = [Disc(r.x_m, r.y_m, r.footprint_radius_m) for r in explicit]
@@ -194,6 +198,28 @@ def ripples_m(
         along = along + 0.5 * sinuosity * wavelength_m * wander
     phase = np.mod(along / wavelength_m + phase0, 1.0)
     return amplitude_m * ripple_profile(phase, sharpness)
+
+
+def drift_ripple_m(
+    xs_m: np.ndarray,
+    ys_m: np.ndarray,
+    x_m: float,
+    y_m: float,
+    height_m: float,
+    width_m: float,
+    length_m: float,
+    azimuth_deg: float,
+) -> np.ndarray:
+    """Thickness of one drift ripple (see :class:`terrains.recipe.DriftRippleSpec`): ``height cos^2(pi u / width)``
+    across the crest, the crest ``length_m`` long with ends rounded by a ``cos^2`` taper over half a width."""
+    az = math.radians(azimuth_deg)
+    dx, dy = xs_m[None, :] - x_m, ys_m[:, None] - y_m
+    across = math.cos(az) * dx + math.sin(az) * dy
+    along = -math.sin(az) * dx + math.cos(az) * dy
+    section = np.where(np.abs(across) <= 0.5 * width_m, np.cos(np.pi * across / width_m) ** 2, 0.0)
+    taper_m = 0.5 * width_m
+    beyond = np.clip(np.abs(along) - (0.5 * length_m - taper_m), 0.0, taper_m) / taper_m  # 0 inside, 1 at the end
+    return height_m * section * np.cos(0.5 * np.pi * beyond) ** 2
 
 
 def crater_profile_m(

@@ -52,6 +52,7 @@ class Material(IntEnum):
     SAND = 0  # loose aeolian sand / soil: deforms, slips (Eagle crater, ripples)
     BEDROCK = 1  # outcrop: hard, little slip even at 20 deg
     MIXED = 2  # thin sand over rock, or gravel: in between
+    DRIFT = 3  # loose, fine-grained, porous drift (Purgatory ripple): only the experimental Wong-Reece law has it
 
 
 # --------------------------------------------------------------------------------------------------- rocks
@@ -281,6 +282,7 @@ _MATERIAL_RGBA = {
     Material.SAND: (194, 140, 102, 255),
     Material.BEDROCK: (150, 118, 96, 255),
     Material.MIXED: (172, 128, 98, 255),
+    Material.DRIFT: (206, 152, 112, 255),
 }
 
 

@@ -38,8 +38,8 @@ _STYLE: dict[str, dict[str, object]] = {
     "vo": {"color": "tab:blue", "linestyle": "-", "label": "visual odometry"},
 }
 # Map tint per Material code (SAND, BEDROCK, MIXED), chosen for legibility under the hillshade.
-_MATERIAL_RGB = np.array([[0.90, 0.72, 0.50], [0.60, 0.56, 0.56], [0.76, 0.64, 0.52]])
-_MATERIAL_NAMES = ("sand", "bedrock", "mixed")
+_MATERIAL_RGB = np.array([[0.90, 0.72, 0.50], [0.60, 0.56, 0.56], [0.76, 0.64, 0.52], [0.96, 0.80, 0.60]])
+_MATERIAL_NAMES = ("sand", "bedrock", "mixed", "drift")
 
 
 def _style(name: str, index: int) -> dict[str, object]:

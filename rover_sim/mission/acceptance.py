@@ -7,6 +7,7 @@ The CLI and the benchmark modules read them from here and nowhere else.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from rover_sim.mission.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_POSITIVE_FRACTION
@@ -103,6 +104,12 @@ def describe(p: PassSpec) -> str:
         parts.append(f"goal within {p.goal_within_m:g} m")
     if p.max_body_collisions is not None:
         parts.append(f"<= {p.max_body_collisions} collisions")
+    if p.min_final_sinkage_m is not None:
+        parts.append(f"final sinkage >= {p.min_final_sinkage_m:g} m")
+    if p.max_final_sinkage_m is not None:
+        parts.append(f"final sinkage <= {p.max_final_sinkage_m:g} m")
+    if p.min_final_slip_pct is not None:
+        parts.append(f"final slip >= {p.min_final_slip_pct:g} %")
     return ", ".join(parts) or "runs to completion"
 
 
@@ -169,4 +176,20 @@ def judge(
             m.tall_rock_contacts <= p.max_body_collisions,
             f"{m.tall_rock_contacts} ticks touching rocks taller than {TALL_ROCK_M} m",
         )
+    if p.judges_wheels():
+        _judge_wheels(m.extra.get("wheels"), p, need)
     return (not fails, "; ".join(fails) if fails else "all criteria met")
+
+
+def _judge_wheels(wheels: dict | None, p: PassSpec, need: Callable[[bool, str], None]) -> None:
+    """The embedding criteria (purgatory_ripple): the wheels' sinkage and slip at the end of the run."""
+    if wheels is None:
+        need(False, "final wheel sinkage and slip not measured")
+        return
+    z, slip = wheels["final_sinkage_m"], wheels["final_slip_pct"]
+    if p.min_final_sinkage_m is not None:
+        need(z >= p.min_final_sinkage_m, f"final sinkage {z} m < {p.min_final_sinkage_m} m")
+    if p.max_final_sinkage_m is not None:
+        need(z <= p.max_final_sinkage_m, f"final sinkage {z} m > {p.max_final_sinkage_m} m")
+    if p.min_final_slip_pct is not None:
+        need(slip is not None and slip >= p.min_final_slip_pct, f"final slip {slip} % < {p.min_final_slip_pct} %")

@@ -31,6 +31,7 @@ def false_positive_limit_m(step_m: float) -> float:
 
 
 SLIP_WINDOW_M = 0.35  # commanded travel per slip sample when there are no VO steps (MER's VO step)
+FINAL_SLIP_WINDOW_M = 1.0  # the embedding check (purgatory_ripple): slip over the last metre of commanded travel
 MIN_SLIP_TRAVEL_M = 0.05  # steps commanding less travel than this (turns in place) give no slip sample
 # errors as a percentage of distance need a distance: below this path length (a mast-only run, a zero-length drive,
 # a turn in place) the *_error_pct metrics are None (not measured) and only the errors in metres are reported
@@ -144,6 +145,26 @@ def window_slips(truth: list[Pose], commanded_m: list[float], window_m: float = 
     return np.array(out, dtype=float)
 
 
+def final_slip(truth: list[Pose], commanded_m: list[float], window_m: float = FINAL_SLIP_WINDOW_M) -> float | None:
+    """Slip over the last ``window_m`` of commanded travel (all of it if the drive was shorter): 1 - true
+    along-heading progress / commanded, as in :func:`window_slips`; None below ``MIN_SLIP_TRAVEL_M`` commanded."""
+    progress = commanded = 0.0
+    for k in range(len(truth) - 1, 0, -1):
+        if abs(commanded) >= window_m:
+            break
+        a, b = truth[k - 1], truth[k]
+        x_axis = a.R_world_rover[:, 0]
+        heading = x_axis[:2] / max(float(np.linalg.norm(x_axis[:2])), 1e-9)
+        progress += float(np.dot(b.position_xyz_m[:2] - a.position_xyz_m[:2], heading))
+        commanded += commanded_m[k] - commanded_m[k - 1]
+    return 1.0 - progress / commanded if abs(commanded) >= MIN_SLIP_TRAVEL_M else None
+
+
+def wheel_sinkage_m(centres_m: np.ndarray, ground_m: np.ndarray, radius_m: float) -> np.ndarray:
+    """Depth of each wheel's bottom (centre minus radius) below the undisturbed ground under its centre, m."""
+    return np.asarray(ground_m, dtype=float) - (np.asarray(centres_m, dtype=float)[:, 2] - radius_m)
+
+
 class Evaluator:
     """Collects truth beside the estimates during a run; computes the metrics at the end."""
 
@@ -221,6 +242,20 @@ class Evaluator:
         return self.keep_out_info
 
     # ------------------------------------------------------------------ at the end
+    def final_wheels(
+        self, centres_m: np.ndarray, ground_m: np.ndarray, radius_m: float, law_sinkage_m: np.ndarray
+    ) -> dict:
+        """The wheels at the end of the run (``metrics.extra["wheels"]``): geometric sinkage below the undisturbed
+        ground (mean and per wheel), the soil law's own sinkage (mean) and the slip over the last metre."""
+        z = wheel_sinkage_m(centres_m, ground_m, radius_m)
+        slip = final_slip(self.truth, self.commanded_m)
+        return {
+            "final_sinkage_m": round(float(np.mean(z)), 4),
+            "final_sinkage_per_wheel_m": [round(float(v), 4) for v in z],
+            "final_law_sinkage_m": round(float(np.mean(law_sinkage_m)), 4),
+            "final_slip_pct": None if slip is None else round(100.0 * slip, 2),
+        }
+
     def trajectories(self) -> dict[str, Trajectory]:
         out = {"truth": Trajectory.from_poses(self.truth), "dead_reckoning": Trajectory.from_poses(self.dr_poses)}
         if self.has_vo:

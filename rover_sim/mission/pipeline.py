@@ -40,7 +40,7 @@ from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, Ma
 from rover_sim.mission.sol import BudgetSpent, SolBudget
 from rover_sim.mission.world import World
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
-from rover_sim.sim.physics import RoverSim
+from rover_sim.sim.physics import WHEEL_RADIUS_M, RoverSim
 
 __all__ = ["Halt", "Metrics", "Mission", "TALL_ROCK_M", "VoStepRecord"]
 
@@ -521,6 +521,10 @@ class Mission:
         timing["realtime_factor"] = round(self.sim.time_s / max(wall_s, 1e-9), 1)
         if self.sol is not None:
             extra["sol"] = self.sol.summary()
+        if self.sim.soil_model != "bekker" or self.sc.passing.judges_wheels():  # the default law's metrics unchanged
+            c = self.sim.wheel_centres_m()
+            ground = self.sim.terrain.height_at(c[:, 0], c[:, 1])  # undisturbed (the deformed surface is separate)
+            extra["wheels"] = self.evaluator.final_wheels(c, ground, WHEEL_RADIUS_M, self.sim.law.state.sinkage_m)
         if self.sim.streamer is not None:
             st = self.sim.streamer
             extra["streamed_terrain"] = {"recentres": st.recentres, "tiles_built": st.site.tiles_built,

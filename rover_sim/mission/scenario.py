@@ -291,6 +291,20 @@ class PassSpec(_Spec):
     max_body_collisions: int | None = Field(
         None, ge=0, le=1000, description="Ticks with the body touching anything, or any part touching a rock >= 25 cm."
     )
+    # embedding (issue #13, purgatory_ripple): the wheels' state at the end of the run, from truth
+    min_final_sinkage_m: float | None = Field(
+        None, ge=0.0, le=0.5,
+        description="Mean depth of the six wheels' bottoms below the undisturbed ground at the end (deformable).",
+    )  # fmt: skip
+    max_final_sinkage_m: float | None = Field(None, ge=0.0, le=0.5, description="Upper bound of the same.")
+    min_final_slip_pct: float | None = Field(
+        None, ge=0.0, le=500.0, description="Slip over the last metre of commanded wheel travel (truth)."
+    )
+
+    def judges_wheels(self) -> bool:
+        """True when a criterion needs the end-of-run wheel metrics (``metrics.extra["wheels"]``)."""
+        bounds = (self.min_final_sinkage_m, self.max_final_sinkage_m, self.min_final_slip_pct)
+        return any(b is not None for b in bounds)
 
 
 class SolSpec(_Spec):
@@ -370,6 +384,21 @@ class Scenario(_Spec):
         return self
 
     @model_validator(mode="after")
+    def _drift_needs_wong_reece(self) -> Scenario:
+        if self.terrain.drift_ripples and self.physics.soil_model != "wong_reece":
+            raise ValueError(
+                "terrain.drift_ripples need physics.soil_model = 'wong_reece' (the default 'bekker' law has no drift "
+                f"soil); got {self.physics.soil_model!r}"
+            )
+        p = self.passing
+        if (p.min_final_sinkage_m is not None or p.max_final_sinkage_m is not None) and not self.physics.deformable:
+            raise ValueError(
+                "pass.min_final_sinkage_m / max_final_sinkage_m measure the wheels' depth in the deformed ground: "
+                "they need physics.deformable = true (and soil_model = 'wong_reece')"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _sleep_needs_a_sol(self) -> Scenario:
         for i, cmd in enumerate(self.commands):
             if not isinstance(cmd, SleepCmd):
@@ -404,6 +433,8 @@ class Scenario(_Spec):
                 del d["physics"][key]
         if d["terrain"].get("streamed", 0) is None:  # opt-in streaming: whole-site scenario.json files unchanged
             del d["terrain"]["streamed"]
+        if d["terrain"].get("drift_ripples", 0) == []:  # opt-in drift (purgatory_ripple): other files unchanged
+            del d["terrain"]["drift_ripples"]
         if d.get("sol", 0) is None:
             del d["sol"]
         return d

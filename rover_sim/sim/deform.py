@@ -6,8 +6,15 @@ that sinkage becomes geometry, as in Chrono's SCM but on MuJoCo's heightfield gr
 * **ruts**: every deformable cell under a wheel's contact patch (a ``width x (contact length + one cell)``
   rectangle along the wheel's heading) is lowered to ``h0 - z`` (``h0`` the undisturbed height), never raised by a
   wheel; physics sees it at once (``model.hfield_data``), so the rover rides in its ruts;
-* **berms**: the soil a wheel pushes down is put back beside the rut (the cells from half a width to half a width
-  plus ``BERM_CELLS`` cells on each side, equally): volume is conserved to the grid's resolution;
+* **rut shoulders**: the collision wheel is a sphere of the wheel's radius ``r``, wider than the 16 cm tread: the
+  cells beside the tread out to ``r`` are lowered to the sphere's underside at the rut depth
+  (``h0 - z + r - sqrt(r^2 - d^2)`` at ``d`` from the wheel's mid-plane), so the wheel sits in its rut at the law's
+  sinkage instead of hanging on the rut's edges;
+* **berms**: the soil a wheel pushes down is put back beside the rut (the cells from the wider of half a width and
+  ``r`` out to ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally; never under the collision sphere, where a
+  berm raised in one write would push into it; wider beside a deeper rut, so a wheel digging in spreads the soil
+  outward: its berm's crest, next to the rut, stays below the rut's depth): volume is conserved to the grid's
+  resolution;
 * **multipass / compaction**: a rut is plastic: a later wheel deepens it only where its own sinkage is larger
   (SCM's loading-only-beyond-the-previous-maximum); the law is told the rut depth ahead of each wheel
   (``law.presink_m``), so only the new compaction resists (a second pass sinks less and rolls easier);
@@ -28,11 +35,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from nav.types import WHEELS
+
 if TYPE_CHECKING:
     from rover_sim.sim.physics import RoverSim
 
 UPDATE_M = 0.02  # contact travel between rut writes (half a 4 cm cell)
 BERM_CELLS = 2
+BERM_SPREAD = 3.0  # a berm is at least this many rut depths wide (about a third of the rut's depth tall)
 SINK_FILTER_S = 0.5
 
 
@@ -61,6 +71,9 @@ class DeformableTerrain:
         self._alpha = sim.timestep_s / (SINK_FILTER_S + sim.timestep_s)
         self.enabled = True
         self._dirty: tuple[int, int, int, int] | None = None  # (i0, i1, j0, j1) cells changed since pop_dirty_cells
+        self._sphere_r = sim.law.radius_m  # the collision wheel: a sphere of the wheel's radius (models/mer/rover.xml)
+        self._xpos = sim.data.xpos  # body positions (a live view): the wheel centres
+        self._wheel_ids = [m.body(f"wheel_{w}").id for w in WHEELS]
 
     # ------------------------------------------------------------------ state
     def heights_m(self) -> np.ndarray:
@@ -95,15 +108,21 @@ class DeformableTerrain:
         st = law.out_state()
         W, z_all = st[0], st[1]
         axles = law.axles
+        centres = self._xpos[self._wheel_ids].tolist()
         for w in range(6):
             if W[w] <= 0.0 or not law.materials[mats[w]].deformable:
                 law.presink_m[w] = self._zf[w] = 0.0
                 continue
-            px, py, _ = pos[w]
             ax, ay, _ = axles[w]
             hx, hy = ay, -ax  # heading = axle x up, projected
             hn = math.hypot(hx, hy) or 1.0
             hx, hy = hx / hn, hy / hn
+            # the rut lies in the wheel's mid-plane: the contact point's offset from the wheel centre along the
+            # heading is kept (on a slope the wheel touches ahead of or behind its axle), the sideways one dropped
+            # (a wheel deep in its rut also touches the rut's side: that point is not where the tread is)
+            cx, cy, _ = centres[w]
+            along = (pos[w][0] - cx) * hx + (pos[w][1] - cy) * hy
+            px, py = cx + along * hx, cy + along * hy
             lp = law.patch_length(w)
             lead = 0.5 * lp + UPDATE_M + 2.5 * self._cell  # beyond this wheel's own footprint
             law.presink_m[w] = max(self.rut_depth_at(px + lead * hx, py + lead * hy), 0.0)
@@ -119,7 +138,9 @@ class DeformableTerrain:
         # behind: the patch; ahead: the patch plus the travel until the next write and a cell, so that the
         # collision sphere never meets the rut's front edge (the law already resists the motion: no double count)
         back, front, half_w = 0.5 * lp + 0.5 * cell, 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
-        reach = half_w + BERM_CELLS * cell
+        r = self._sphere_r
+        shoulder = max(half_w, r)
+        reach = shoulder + max(BERM_CELLS * cell, BERM_SPREAD * z)
         span = int(math.ceil(max(front, reach) / cell)) + 1
         ci, cj = self._cell_of(px, py)
         h, h0, soft = self._h, self._h0, self._soft
@@ -135,8 +156,10 @@ class DeformableTerrain:
                 along, across = dx * hx + dy * hy, abs(-dx * hy + dy * hx)
                 if along > front or along < -back:
                     continue
-                if across <= half_w:
-                    target = row_h0[j] - z
+                if across < shoulder:
+                    target = row_h0[j] - z  # the tread; beside it, the sphere's underside
+                    if across > half_w:
+                        target += r - math.sqrt(r * r - across * across)
                     if target < row_h[j]:
                         displaced += row_h[j] - target
                         row_h[j] = target

@@ -108,6 +108,12 @@ class RoverSim:
             self._apply_soil_law = self._apply_soil_law_wr  # the default law's path stays untouched
         else:
             self.law = WheelSoilLaw(WHEEL_RADIUS_M, WHEEL_WIDTH_M)
+        n_mat = len(self.law.materials)
+        if np.size(terrain.materials) and int(np.max(terrain.materials)) >= n_mat:  # e.g. drift with the default law
+            raise ValueError(
+                f"the terrain has material code {int(np.max(terrain.materials))} but the {soil_model!r} soil law knows "
+                f"only {n_mat} materials (drift ripples need soil_model 'wong_reece')"
+            )
         m = self.model
         self._wheel_body = np.array([m.body(f"wheel_{w}").id for w in WHEELS])
         self._wheel_qadr = np.array([m.jnt_qposadr[m.joint(f"wheel_{w}").id] for w in WHEELS])
@@ -230,6 +236,7 @@ class RoverSim:
         mujoco.mj_resetDataKeyframe(self.model, self.data, self.model.key("home").id)
         self.law.reset()
         self.wheel_ref_rad[:] = 0.0
+        self._slide_track: list[tuple[float, np.ndarray]] = []  # (t, position) samples of safety_issue
         mujoco.mj_forward(self.model, self.data)
 
     def place(self, x_m: float, y_m: float, yaw_rad: float, settle_s: float = 1.5) -> None:
@@ -349,11 +356,15 @@ class RoverSim:
             out.append(MATERIAL_ROCK if on_rock else self._mat_list[i][j])
         return out
 
-    def safety_issue(self, margin_m: float = 0.3, slide_speed_m_s: float = 0.15) -> tuple[str, str] | None:
+    def safety_issue(
+        self, margin_m: float = 0.3, slide_speed_m_s: float = 0.15, window_s: float = 1.0
+    ) -> tuple[str, str] | None:
         """``("left_terrain", why)`` when a wheel is within ``margin_m`` of the heightfield's edge or the rover is
-        below the ground, ``("slid_down_slope", why)`` when the rover moves faster than any drive command could
-        move it (MER's wheels turn at most 5 cm/s): the slope is too steep for the soil to hold. None otherwise.
-        Missions check it only with the experimental soil model (see Mission.tick)."""
+        below the ground, ``("slid_down_slope", why)`` when the rover has moved faster than any drive command could
+        move it (MER's wheels turn at most 5 cm/s) over the last ``window_s`` (net displacement over that time, from
+        the calls' samples: a slide is sustained; a jolt of a wheel in a deep rut or a stick-slip lurch is not):
+        the slope is too steep for the soil to hold. None otherwise. Missions check it only with the experimental
+        soil model (see Mission.tick), at 8 Hz."""
         t = self.time_s
         c = self.wheel_centres_m()
         hx, hy = self._half_x - margin_m, self._half_y - margin_m
@@ -363,7 +374,12 @@ class RoverSim:
         ground = self.terrain.height_at(c[:, 0], c[:, 1])
         if (c[:, 2] < ground - 0.2).any():
             return "left_terrain", f"the rover fell through the ground at t = {t:.1f} s"
-        v = float(np.linalg.norm(self.data.qvel[0:3]))
+        track = self._slide_track
+        track.append((t, self.position_m()))
+        while len(track) > 2 and t - track[1][0] >= window_s:
+            track.pop(0)
+        t0, p0 = track[0]
+        v = float(np.linalg.norm(track[-1][1] - p0)) / (t - t0) if t - t0 >= window_s else 0.0
         if v > slide_speed_m_s:
             return "slid_down_slope", (
                 f"the rover slid down the slope at t = {t:.1f} s ({v:.2f} m/s; the wheels drive at most 0.05 m/s):"

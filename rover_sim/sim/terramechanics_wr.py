@@ -51,7 +51,9 @@ import numpy as np
 from rover_sim.sim.soil_tables import N_LOAD, N_SLIP, SoilParams, WheelParams, build_table
 from rover_sim.sim.terramechanics import pack_inputs  # noqa: F401 - the same input layout as the default law
 
-__all__ = ["BEDROCK", "MATERIALS", "MIXED", "SAND", "SoilParams", "WheelParams", "WheelSoilLaw", "WheelSoilState"]
+__all__ = [
+    "BEDROCK", "DRIFT", "MATERIALS", "MIXED", "SAND", "SoilParams", "WheelParams", "WheelSoilLaw", "WheelSoilState",
+]
 
 # Loose Martian sand. Every value inside the published ranges (REFERENCE.md section 2: c 0.2-1 kPa, phi 28-37 deg,
 # K 1-2.5 cm, k_c 1e3-1.4e4, k_phi 8e5-2.3e6, n about 1; Ding et al. 2011 for n1; Wong-Reece a0 0.4, a1 0.15 and
@@ -109,8 +111,33 @@ MIXED = SoilParams(
     density_kg_m3=1800.0,
 )
 
-# Index order matches terrains.Material (SAND=0, BEDROCK=1, MIXED=2); rocks are treated as BEDROCK.
-MATERIALS: tuple[SoilParams, ...] = (SAND, BEDROCK, MIXED)
+# Loose, fine-grained, porous drift: the soil of Opportunity's Purgatory ripple (Sol 446), where the wheels dug in to
+# their hubs. Published for Martian drift: friction angle 26-28 deg (Pathfinder drifts, Moore et al. 1999, JGR 104
+# E4) and about 18 deg (Viking Lander 1 drift, Moore et al. 1987); cohesion small, about 0.01-0.1 kPa (Viking 1
+# drift trench walls, Shorthill/Moore et al. 1977) and bulk density about 1150 kg/m^3 (Viking drift, Moore et al.
+# 1987). Chosen inside those: phi 25 deg, c 0.1 kPa, 1200 kg/m^3. No Bekker moduli are published for Martian drift
+# ("porous, compressible", Moore 1999): k_c 0 and k_phi 1e5 (about an eighth of the sand range's low end in
+# REFERENCE.md section 2, as for very loose, fine soils) are a CALIBRATION CHOICE: the static sinkage of a MER wheel
+# under a sixth of the rover's weight is then about 7 cm, near its hub (12.5 cm) at high slip, as at Purgatory.
+# Shear modulus K at the loose end of the sand range (2.5 cm); slip-sinkage n1, a0, a1 as for SAND. Not tuned on
+# the purgatory_ripple scenarios' outcomes (they judge it).
+DRIFT = SoilParams(
+    name="drift",
+    cohesion_pa=100.0,
+    friction_angle_deg=25.0,
+    shear_modulus_m=0.025,
+    lateral_shear_modulus_m=0.010,
+    k_c=0.0,
+    k_phi=1.0e5,
+    n0=1.0,
+    n1=0.5,
+    a0=0.40,
+    a1=0.15,
+    density_kg_m3=1200.0,
+)
+
+# Index order matches terrains.Material (SAND=0, BEDROCK=1, MIXED=2, DRIFT=3); rocks are treated as BEDROCK.
+MATERIALS: tuple[SoilParams, ...] = (SAND, BEDROCK, MIXED, DRIFT)
 
 BOW_M = 0.002  # advance over which the front-loaded (resisting) stress distribution forms
 _VEL_FILTER_S = 0.1  # window of the net motion that renews the soil under the patch
