@@ -71,6 +71,7 @@ class DeformableTerrain:
         self._alpha = sim.timestep_s / (SINK_FILTER_S + sim.timestep_s)
         self.enabled = True
         self._dirty: tuple[int, int, int, int] | None = None  # (i0, i1, j0, j1) cells changed since pop_dirty_cells
+        self._dirty_log: tuple[int, int, int, int] | None = None  # the same, since pop_dirty_cells_for_log
         self._sphere_r = sim.law.radius_m  # the collision wheel: a sphere of the wheel's radius (models/mer/rover.xml)
         self._xpos = sim.data.xpos  # body positions (a live view): the wheel centres
         self._wheel_ids = [m.body(f"wheel_{w}").id for w in WHEELS]
@@ -92,6 +93,12 @@ class DeformableTerrain:
         """Inclusive cell box ``(i0, i1, j0, j1)`` holding every cell changed since the last call (None: none);
         for one consumer (the render model's tiles, ``rover_sim.render.ruts``)."""
         box, self._dirty = self._dirty, None
+        return box
+
+    def pop_dirty_cells_for_log(self) -> tuple[int, int, int, int] | None:
+        """As :meth:`pop_dirty_cells`, for a second consumer with its own box (the recording's ground tiles,
+        ``rover_sim.mission.rut_log``)."""
+        box, self._dirty_log = self._dirty_log, None
         return box
 
     def _cell_of(self, x: float, y: float) -> tuple[int, int]:
@@ -172,13 +179,17 @@ class DeformableTerrain:
                 h[i][j] += dh
                 self._push(i, j)
         if displaced > 0.0:
-            d = self._dirty or (ci, ci, cj, cj)
-            self._dirty = (
-                max(min(d[0], ci - span), 0),
-                min(max(d[1], ci + span), self._nrow - 1),
-                max(min(d[2], cj - span), 0),
-                min(max(d[3], cj + span), self._ncol - 1),
-            )
+            self._dirty = self._grown(self._dirty, ci, cj, span)
+            self._dirty_log = self._grown(self._dirty_log, ci, cj, span)
+
+    def _grown(self, d: tuple[int, int, int, int] | None, ci: int, cj: int, span: int) -> tuple[int, int, int, int]:
+        d = d or (ci, ci, cj, cj)
+        return (
+            max(min(d[0], ci - span), 0),
+            min(max(d[1], ci + span), self._nrow - 1),
+            max(min(d[2], cj - span), 0),
+            min(max(d[3], cj + span), self._ncol - 1),
+        )
 
     def _push(self, i: int, j: int) -> None:
         self._hf[self._adr + i * self._ncol + j] = (self._h[i][j] - self._base) / self._scale
