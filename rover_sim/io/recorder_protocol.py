@@ -25,7 +25,11 @@ class Recorder(Protocol):
 
     def wants_images(self) -> bool: ...
 
-    def log_terrain(self, terrain: Terrain) -> None: ...
+    def log_terrain(self, terrain: Terrain, ground: bool = True) -> None: ...
+
+    def log_ground_tile(
+        self, key: str, t_s: float, step: int | None, tile: Terrain, centre_xy_m: tuple[float, float], mesh_step: int
+    ) -> None: ...
 
     def log_terrain_tile(self, key: str, terrain: Terrain) -> None: ...
 
@@ -93,7 +97,12 @@ class NullRecorder:
     def wants_images(self) -> bool:
         return False
 
-    def log_terrain(self, terrain: Terrain) -> None:
+    def log_terrain(self, terrain: Terrain, ground: bool = True) -> None:
+        pass
+
+    def log_ground_tile(
+        self, key: str, t_s: float, step: int | None, tile: Terrain, centre_xy_m: tuple[float, float], mesh_step: int
+    ) -> None:
         pass
 
     def log_terrain_tile(self, key: str, terrain: Terrain) -> None:

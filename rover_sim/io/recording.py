@@ -6,6 +6,8 @@ The entity tree mirrors the frame tree (rerun ``nuscenes`` example style)::
     world/terrain                           Mesh3D coloured by material, static
     world/terrain/rocks                     Mesh3D of every rock, static
     world/terrain/tiles/t<x>_<y>[/rocks]    a streamed site: each tile once, coarse, when it first appears
+    world/terrain/ground/t<i>_<j>           a deformable site (no world/terrain mesh): ground tiles on the timeline,
+                                            re-logged at full resolution when ruts change them (mission/rut_log.py)
     world/rover                             Transform3D (world <- rover) every tick
     world/rover/visual                      Boxes3D + Cylinders3D (body, deck, mast, 6 wheels), static
     world/rover/<camera>/{left,right}       Transform3D (rover <- camera, from T_rover_cam; re-logged only when it
@@ -171,12 +173,22 @@ class RerunRecorder:
 
     # -- static ----------------------------------------------------------------------------------------------
 
-    def log_terrain(self, terrain: Terrain) -> None:
-        """Static ground mesh (material colours) and rock meshes. Keep-out circles drape on it afterwards."""
+    def log_terrain(self, terrain: Terrain, ground: bool = True) -> None:
+        """Static ground mesh (material colours, decimated) and rock meshes; ``ground=False``: rocks only (the
+        ground comes as :meth:`log_ground_tile` tiles). Keep-out circles drape on it afterwards."""
         self._terrain = terrain
-        self._log("world/terrain", ground_mesh(terrain, terrain_mesh_step(terrain.nrow, terrain.ncol)), static=True)
+        if ground:
+            self._log("world/terrain", ground_mesh(terrain, terrain_mesh_step(terrain.nrow, terrain.ncol)), static=True)
         if terrain.rocks:
             self._log("world/terrain/rocks", rocks_mesh(terrain.rocks), static=True)
+
+    def log_ground_tile(
+        self, key: str, t_s: float, step: int | None, tile: Terrain, centre_xy_m: tuple[float, float], mesh_step: int
+    ) -> None:
+        """One ground tile of a deformable site at ``t_s`` (re-logging replaces it from then on): ``tile``'s
+        heightfield every ``mesh_step`` cells, its grid centred at ``centre_xy_m``."""
+        self._time(t_s, step)
+        self._log(f"world/terrain/ground/{key}", ground_mesh(tile, mesh_step, centre_xy_m))
 
     def log_terrain_tile(self, key: str, terrain: Terrain) -> None:
         """One tile of a streamed site, logged once when it first appears (static, coarse: about

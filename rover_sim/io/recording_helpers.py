@@ -90,11 +90,14 @@ class PolylineState:
 ROCK_RGBA = (120, 104, 92, 255)
 
 
-def ground_mesh(terrain: Terrain, step: int) -> rr.Mesh3D:
-    """The heightfield every ``step`` cells, coloured by material."""
+def ground_mesh(terrain: Terrain, step: int, offset_xy_m: tuple[float, float] | None = None) -> rr.Mesh3D:
+    """The heightfield every ``step`` cells, coloured by material; moved by ``offset_xy_m`` (a tile of a grid)."""
     mesh = terrain.to_mesh(step=step, colour_by_material=True)
+    vertices = np.asarray(mesh.vertices)
+    if offset_xy_m is not None:
+        vertices = vertices + np.array([offset_xy_m[0], offset_xy_m[1], 0.0])
     return rr.Mesh3D(
-        vertex_positions=np.asarray(mesh.vertices, dtype=np.float32),
+        vertex_positions=np.asarray(vertices, dtype=np.float32),
         triangle_indices=np.asarray(mesh.faces, dtype=np.uint32),
         vertex_normals=np.asarray(mesh.vertex_normals, dtype=np.float32),
         vertex_colors=np.asarray(mesh.visual.vertex_colors, dtype=np.uint8),

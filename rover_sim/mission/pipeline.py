@@ -36,6 +36,7 @@ from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
 from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
 from rover_sim.mission.pointing import seek_texture
 from rover_sim.mission.rover_shape import rover_shape
+from rover_sim.mission.rut_log import RutLog
 from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, SleepCmd, TurnCmd
 from rover_sim.mission.sol import BudgetSpent, SolBudget
 from rover_sim.mission.world import World
@@ -99,6 +100,7 @@ class Mission:
     ) -> None:
         self.sc = scenario
         self.rec: Recorder = recorder or NullRecorder()
+        self.rut_log: RutLog | None = None  # deformable runs: the recording's ground tiles (set by log_static)
         self.progress = progress
         self.world = World(scenario)
         nav = scenario.nav
@@ -195,6 +197,8 @@ class Mission:
             self.event(self.error, "ERROR")
         finally:
             self.world.sensors.detach()
+            if self.rut_log is not None:
+                self.rut_log.flush(self.sim.time_s, self.step)
         return self.metrics(time.perf_counter() - t0)
 
     def run_command(self, cmd) -> None:  # noqa: ANN001
@@ -333,6 +337,8 @@ class Mission:
             self.log_tracks(t)
         if sim.terrain_version != self._terrain_version:
             self.log_terrain_tiles()
+        if self.rut_log is not None:
+            self.rut_log.update(t, self.step)
         if self.progress is not None:
             self.progress(t, "")
         self.check_keep_out()
@@ -437,6 +443,10 @@ class Mission:
     def log_static(self) -> None:
         if self.sim.streamer is not None:
             self.log_terrain_tiles()
+        elif self.sim.deform is not None:  # the ground as tiles re-logged where ruts change them (mission/rut_log.py)
+            self.rec.log_terrain(self.terrain, ground=False)
+            self.rut_log = RutLog(self.sim, self.rec)
+            self.rut_log.log_all(self.sim.time_s, self.step)
         else:
             self.rec.log_terrain(self.terrain)
         for z in self.sc.keep_out:
