@@ -63,6 +63,7 @@ from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles
     add_terrain_tiles,
 )
 from rover_sim.render.window import ROCK_MATERIAL, follow_window, rock_rgba, slot_box
+from rover_sim.sim.stream import release_freed_memory
 from rover_sim.sim.world import ROCK_GEOM_PREFIX
 
 if TYPE_CHECKING:
@@ -515,6 +516,7 @@ class StereoRenderer:
                 self.world = RenderWorld(self.sim, self.config, self.lens.max_render_px)
                 if self._sun_direction_world is not None:  # a moved sun (mission clock): not the model's start sun
                     self.world.model.light_dir[self.world.sun_id] = self._sun_direction_world
+            release_freed_memory()  # the previous window's tile meshes and texture (see sim/stream.py)
         w = self.world
         w.ruts.refresh(list(self._renderers.values()))  # no-op without [physics] deformable
         w.sync()

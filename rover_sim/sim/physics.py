@@ -12,6 +12,7 @@ import numpy as np
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
 from rover_sim.sim.soil_kernel import apply_wheel_wrenches, materials_under
+from rover_sim.sim.stream import release_freed_memory
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
 from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 
@@ -210,6 +211,7 @@ class RoverSim:
         self.terrain = window
         self.terrain_version += 1
         self._set_terrain_lookups()
+        release_freed_memory()  # the previous window's arrays (see sim/stream.py)
 
     def enable_deformation(self) -> DeformableTerrain:
         """Make the heightfield deformable under the wheels (ruts, berms, multipass; see sim/deform.py).
