@@ -34,23 +34,21 @@ Lenses (``[sensors.lens]``, flight profile): with a :class:`~rover_sim.render.le
 a wider pinhole view and remapped into the true raw (distorted) cameras before binning and noise (one call in
 :meth:`StereoRenderer._grey`); without one (ideal profile) nothing changes.
 
-GL: ``MUJOCO_GL=egl`` (set by ``rover_sim/__init__``); each :class:`mujoco.Renderer` owns one EGL context.
-Never ``fork()`` a process after a context exists (spawn workers instead).
+GL: ``MUJOCO_GL=egl`` (set by ``rover_sim/__init__``); a :class:`StereoRenderer` owns one EGL context for all its
+render sizes (``gl.py``). Never ``fork()`` a process after a context exists (spawn workers instead).
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
-from functools import cache
 from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
 
 from nav.camera import PinholeCamera, StereoRig
-from rover_sim.errors import RenderingUnavailable
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
+from rover_sim.render.gl import check_gl, set_viewport  # noqa: F401 - check_gl: re-exported
 from rover_sim.render.imaging import ImageFormation, ImagingSpec
 from rover_sim.render.lens import IdentityLens, TrueLens, pair_of
 from rover_sim.render.ruts import TileRuts
@@ -146,31 +144,6 @@ class StereoFrame:
     left: np.ndarray  # (H, W) uint8
     right: np.ndarray  # (H, W) uint8
     meta: dict = field(default_factory=dict)
-
-
-# ----------------------------------------------------------------------------------------------- GL checks
-
-
-@cache
-def check_gl() -> None:
-    """Fail early, with the install hint, if no offscreen OpenGL (EGL) context can be made in this process."""
-    backend = os.environ.get("MUJOCO_GL", "")
-    module = getattr(getattr(mujoco, "GLContext", None), "__module__", "") or "no GL backend"
-    if backend in ("egl", "osmesa") and not module.startswith(f"mujoco.{backend}"):
-        raise RenderingUnavailable(
-            f"mujoco was imported before MUJOCO_GL={backend} took effect and uses {module}; import rover_sim "
-            "before mujoco, or export MUJOCO_GL=egl"
-        )
-    try:
-        ctx = mujoco.GLContext(16, 16)
-        try:
-            ctx.make_current()
-            con = mujoco.MjrContext(mujoco.MjModel.from_xml_string("<mujoco/>"), mujoco.mjtFontScale.mjFONTSCALE_100)
-            con.free()
-        finally:
-            ctx.free()
-    except Exception as exc:  # noqa: BLE001 - any backend failure means "no GL here"; re-raised with the fix
-        raise RenderingUnavailable(f"{type(exc).__name__}: {exc}") from exc
 
 
 # ----------------------------------------------------------------------------------------------- appearance
@@ -428,9 +401,14 @@ def boxes_in_view(boxes: np.ndarray, cam: PinholeCamera, T_world_cam: np.ndarray
 class StereoRenderer:
     """Renders the rover's stereo pairs, depth and segmentation from a :class:`RoverSim`'s current state.
 
-    Owns one :class:`mujoco.Renderer` (one EGL context) per rasterised resolution, created on first use and
-    reused; close it (or use it as a context manager) to free them. Camera geometry is taken from the physics
-    model, so :meth:`rig` equals :func:`rover_sim.render.cameras.stereo_rig` at the output resolution.
+    Owns one :class:`mujoco.Renderer` (one EGL context) for every resolution it rasterises: a render of ``px`` draws
+    into the ``px`` x ``px`` viewport at the corner of the context's offscreen framebuffer (the model's ``offwidth``,
+    the same buffer a ``px``-sized renderer would draw into, so the pixels are the same). One context per size cost
+    ~100-150 MB each on llvmpipe (shadow map, framebuffer, uploaded meshes and texture): the flight lenses draw each
+    pair at its own size, so a drive that first images the rear hazcams while backing up grew by a whole context
+    (issue #18's memory bar); one context also means one upload per streamed window move. Created on first use and
+    reused; close it (or use it as a context manager) to free it. Camera geometry is taken from the physics model,
+    so :meth:`rig` equals :func:`rover_sim.render.cameras.stereo_rig` at the output resolution.
     """
 
     def __init__(self, sim: RoverSim, config: RenderConfig | None = None, lens: TrueLens | None = None) -> None:
@@ -441,7 +419,8 @@ class StereoRenderer:
         self.world = RenderWorld(sim, self.config, self.lens.max_render_px)
         self._sun_direction_world: np.ndarray | None = None  # set_sun's sun, kept across a streamed window's rebuild
         self.shadows = self.config.shadows and sim.sun.shadows  # switch per render: ``renderer.shadows = False``
-        self._renderers: dict[int, mujoco.Renderer] = {}
+        self._gl: mujoco.Renderer | None = None  # the one GL context (see the class docstring)
+        self._gl_px = 0  # the largest viewport it was created for
         self._rng = np.random.default_rng(self.config.noise.seed) if self.config.noise else None
         im = self.config.imaging
         ccd = im is not None and im.model != "ideal"
@@ -456,9 +435,14 @@ class StereoRenderer:
         self._rng = np.random.default_rng(seed) if seed is not None and self.config.noise else None
 
     def close(self) -> None:
-        for r in self._renderers.values():
-            r.close()
-        self._renderers.clear()
+        if self._gl is not None:
+            self._gl.close()
+        self._gl, self._gl_px = None, 0
+
+    @property
+    def contexts(self) -> list[mujoco.Renderer]:
+        """The live GL contexts (none before the first render or after :meth:`close`; at most one)."""
+        return [] if self._gl is None else [self._gl]
 
     def __enter__(self) -> StereoRenderer:
         return self
@@ -467,10 +451,12 @@ class StereoRenderer:
         self.close()
 
     def _renderer(self, px: int) -> mujoco.Renderer:
-        r = self._renderers.get(px)
-        if r is None:
-            r = mujoco.Renderer(self.world.model, px, px)
-            self._renderers[px] = r
+        r = self._gl
+        if r is None or px > self._gl_px:  # the first render, or a larger one than the context was made for
+            self.close()
+            self._gl_px = max(px, self.lens.max_render_px, self.config.native_px, self.config.resolution_px)
+            r = self._gl = mujoco.Renderer(self.world.model, self._gl_px, self._gl_px)
+        set_viewport(r, px)
         sc = r.scene
         sc.flags[mujoco.mjtRndFlag.mjRND_SHADOW] = self.shadows
         sc.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = self.config.skybox
@@ -510,15 +496,14 @@ class StereoRenderer:
         ``lit=False`` (depth, segmentation): no shadow casters outside the view are needed.
         """
         if self.world.terrain_version != self.sim.terrain_version:  # streamed terrain: the window moved
-            contexts = list(self._renderers.values())  # moved in place (window.py); else built as in __init__
-            if not follow_window(self.world, contexts, self.sim.window_texture_rgb()):
+            if not follow_window(self.world, self.contexts, self.sim.window_texture_rgb()):  # moved in place
                 self.close()
                 self.world = RenderWorld(self.sim, self.config, self.lens.max_render_px)
                 if self._sun_direction_world is not None:  # a moved sun (mission clock): not the model's start sun
                     self.world.model.light_dir[self.world.sun_id] = self._sun_direction_world
             release_freed_memory()  # the previous window's tile meshes and texture (see sim/stream.py)
         w = self.world
-        w.ruts.refresh(list(self._renderers.values()))  # no-op without [physics] deformable
+        w.ruts.refresh(self.contexts)  # no-op without [physics] deformable
         w.sync()
         cams = [camera_model(w.model, w.data, n, px, px) for n in cam_names]
         poses = [camera_world_pose(w.model, w.data, n) for n in cam_names]

@@ -20,7 +20,8 @@ ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("rover_sim", "nav", "terrains")
 MAX_LINES = 600
 # private attributes of third-party objects the code legitimately touches (MuJoCo's renderer context, a pool size)
-THIRD_PARTY_PRIVATE = {"_mjr_context", "_gl_context", "_processes"}  # mujoco.Renderer, multiprocessing
+# mujoco.Renderer (context, output size and viewport: render/gl.py set_viewport), multiprocessing
+THIRD_PARTY_PRIVATE = {"_mjr_context", "_gl_context", "_width", "_height", "_rect", "_processes"}
 
 
 def _modules() -> dict[str, Path]:

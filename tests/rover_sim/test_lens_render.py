@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import mujoco
 import numpy as np
 import pytest
 
@@ -282,3 +283,25 @@ def test_flight_world_points_the_mast_with_encoder_error_and_keeps_the_commanded
         assert onboard.rectified(obs, "navcam") is rect  # cached for the other uses of the same pair
     finally:
         world.close()
+
+
+def test_one_gl_context_draws_every_pair_size_like_an_own_size_context(render_world, lens_renderer):
+    """The flight lenses draw each pair at its own size, all in one GL context (render/gl.py set_viewport): a pair
+    drawn after a larger one equals the same pair drawn by a context made for exactly its size, as each size had
+    before (a viewport read from the wrong corner, or kept at the previous size, would differ or fail on shape)."""
+    r, _ = lens_renderer
+    sizes = {pair: v.px for pair, v in r.lens.views.items()}
+    assert len(set(sizes.values())) > 1, f"the flight lenses drew one size for every pair: {sizes}"
+    order = sorted(sizes, key=sizes.get, reverse=True)  # largest first, then smaller viewports
+    frames = {pair: r.render_pair(pair) for pair in order}
+    assert len(r.contexts) == 1
+    for pair in order[1:]:
+        own = StereoRenderer(render_world.sim, lens=r.lens)
+        try:
+            own._gl, own._gl_px = mujoco.Renderer(own.world.model, sizes[pair], sizes[pair]), sizes[pair]
+            want = own.render_pair(pair)
+            assert own.contexts[0].width == sizes[pair]
+        finally:
+            own.close()
+        np.testing.assert_array_equal(frames[pair].left, want.left)
+        np.testing.assert_array_equal(frames[pair].right, want.right)

@@ -59,7 +59,7 @@ def test_a_moved_window_draws_what_a_fresh_render_model_draws() -> None:
             previous = sim.streamer.site.window((tx - 1, ty))  # the rover drove east into this window
             _, old = tile_meshes(previous, r.config.terrain_tile_m, r.config.max_terrain_tiles)
             assert write_tile_meshes(model, old)
-            for ctx in r._renderers.values():
+            for ctx in r.contexts:
                 with ctx._gl_context.as_current():
                     for tm in old:
                         mujoco.mjr_uploadMesh(model, ctx._mjr_context, model.mesh(tm.name).id)
