@@ -345,7 +345,7 @@ class RerunRecorder:
                 continue
             if st.kept and float(np.sum((q - st.kept[-1]) ** 2)) < min2:
                 continue
-            st.kept.append(q)
+            st.kept.append(q.copy())  # not a view: it would keep the caller's whole buffer alive
             changed = True
             if len(st.kept) >= self.segment_points:  # close this block, open the next at its last vertex
                 self._add(f"{base}/path/{st.block:05d}", "strip", (np.asarray(st.kept), rgb))

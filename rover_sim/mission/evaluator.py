@@ -12,12 +12,14 @@ the true along-heading progress, so a detour's curvature is not counted as slip.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
 from nav.geometry import se3_inv
 from nav.trajectory import Pose, Trajectory, relative_errors
+from rover_sim.mission.pose_series import PoseSeries
 
 # An accepted VO update whose translation error exceeds max(FALSE_POSITIVE_M, FALSE_POSITIVE_FRACTION x the true
 # step) is a false positive (issue #17: 2 cm, or 5 % of a 35-75 cm step; MER VO's error was < 1 % of distance).
@@ -125,7 +127,7 @@ def rms_position_error_m(estimate: Trajectory, truth: Trajectory) -> float:
     return round(float(np.sqrt(np.mean(d * d))), 4)
 
 
-def window_slips(truth: list[Pose], commanded_m: list[float], window_m: float = SLIP_WINDOW_M) -> np.ndarray:
+def window_slips(truth: Sequence[Pose], commanded_m: Sequence[float], window_m: float = SLIP_WINDOW_M) -> np.ndarray:
     """Slip over consecutive windows of ``window_m`` commanded travel: 1 - true along-heading progress / commanded.
 
     Progress is summed tick by tick along the true heading at the start of each tick (horizontal plane), so a
@@ -145,7 +147,9 @@ def window_slips(truth: list[Pose], commanded_m: list[float], window_m: float = 
     return np.array(out, dtype=float)
 
 
-def final_slip(truth: list[Pose], commanded_m: list[float], window_m: float = FINAL_SLIP_WINDOW_M) -> float | None:
+def final_slip(
+    truth: Sequence[Pose], commanded_m: Sequence[float], window_m: float = FINAL_SLIP_WINDOW_M
+) -> float | None:
     """Slip over the last ``window_m`` of commanded travel (all of it if the drive was shorter): 1 - true
     along-heading progress / commanded, as in :func:`window_slips`; None below ``MIN_SLIP_TRAVEL_M`` commanded."""
     progress = commanded = 0.0
@@ -170,9 +174,9 @@ class Evaluator:
 
     def __init__(self, scenario_name: str, seed: int, goal_xy: np.ndarray | None, has_vo: bool) -> None:
         self.scenario_name, self.seed, self.goal_xy, self.has_vo = scenario_name, seed, goal_xy, has_vo
-        self.truth: list[Pose] = []
-        self.dr_poses: list[Pose] = []
-        self.onboard_poses: list[Pose] = []
+        self.truth = PoseSeries()  # compact arrays: a day-long drive keeps tens of thousands of each (pose_series.py)
+        self.dr_poses = PoseSeries()
+        self.onboard_poses = PoseSeries()
         self.commanded_m: list[float] = []  # wheel odometry's distance at each recorded pose
         self.vo_steps: list[VoStepRecord] = []
         self.body_collision_ticks = 0
@@ -257,9 +261,9 @@ class Evaluator:
         }
 
     def trajectories(self) -> dict[str, Trajectory]:
-        out = {"truth": Trajectory.from_poses(self.truth), "dead_reckoning": Trajectory.from_poses(self.dr_poses)}
+        out = {"truth": self.truth.trajectory(), "dead_reckoning": self.dr_poses.trajectory()}
         if self.has_vo:
-            out["vo"] = Trajectory.from_poses(self.onboard_poses)
+            out["vo"] = self.onboard_poses.trajectory()
         return out
 
     def metrics(self, *, wall_s: float, sim_s: float, halted: str | None, extra: dict, timing: dict) -> Metrics:

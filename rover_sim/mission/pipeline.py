@@ -61,30 +61,6 @@ def _tilt_deg(R_world_rover: np.ndarray) -> float:
     return math.degrees(math.acos(min(max(float(R_world_rover[2, 2]), -1.0), 1.0)))
 
 
-class _TrackBuffers:
-    """Positions of each pose list in a growing array, so logging a track costs its new poses only (the recorder
-    takes the whole history and sends what is new; rebuilding it from the poses each time was quadratic)."""
-
-    def __init__(self) -> None:
-        self._buf: dict[str, np.ndarray] = {}
-        self._n: dict[str, int] = {}
-
-    def positions(self, name: str, poses: list[Pose]) -> np.ndarray:
-        n = self._n.get(name, 0)
-        if len(poses) < n:  # the list was rewritten: start over
-            n = 0
-        buf = self._buf.get(name)
-        if buf is None or len(buf) < len(poses):
-            grown = np.zeros((max(2 * len(poses), 64), 3))
-            if buf is not None:
-                grown[:n] = buf[:n]
-            buf = self._buf[name] = grown
-        for k in range(n, len(poses)):
-            buf[k] = poses[k].position_xyz_m
-        self._n[name] = len(poses)
-        return buf[: len(poses)]
-
-
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
@@ -134,7 +110,6 @@ class Mission:
         # a sol's drive (issue #18): budgets, mission clock, decimated poses and tracks, streamed terrain tiles
         self.sol: SolBudget | None = SolBudget(scenario.sol, self.world.clock) if scenario.sol is not None else None
         self.pose_stride = scenario.sol.pose_stride if scenario.sol is not None else 1
-        self._tracks = _TrackBuffers()
         self._terrain_version = -1
 
     # ------------------------------------------------------------------ convenience views
@@ -456,9 +431,9 @@ class Mission:
     def log_tracks(self, t: float) -> None:
         ev = self.evaluator
         for name, poses in (("truth", ev.truth), ("dead_reckoning", ev.dr_poses)):
-            self.rec.log_trajectory(name, t, self.step, self._tracks.positions(name, poses))
+            self.rec.log_trajectory(name, t, self.step, poses.positions_xyz_m)
         if self.onboard.vo is not None:
-            self.rec.log_trajectory("vo", t, self.step, self._tracks.positions("vo", ev.onboard_poses))
+            self.rec.log_trajectory("vo", t, self.step, ev.onboard_poses.positions_xyz_m)
         truth = ev.truth[-1]
         rpy = R_to_rpy(truth.R_world_rover)
         gt = self.sim.ground_truth()
