@@ -2,7 +2,8 @@
 
 Cases: the two sol scenarios of the catalogue (``spirit_plains_sol``, ``opportunity_record_sol``) and the
 benchmark-only 1 km traverse (``benchmarks/traverse_1km.toml``). Each case runs in a fresh ``spawn`` process, so
-its peak RSS (``ru_maxrss``) is its own; the RSS is also read when the true path first passes 100 m and at the end.
+its peak RSS (``ru_maxrss``) is its own; the RSS is also read when the true path first passes 100 m and at the end,
+and every 50 m for the details JSON (``rss_trace_mb``: [true path m, RSS MB] pairs, to see where memory grows).
 The recording is written (``recording.rrd``) and its size reported. Errors: dead reckoning and VO (final, % of the
 distance; the 10 m KITTI segment error from metrics.json), the autonav outcome and the true distance to the goal.
 
@@ -28,6 +29,7 @@ CASES = {
     "traverse_1km": BENCH_DIR / "traverse_1km.toml",
 }
 RSS_PROBE_M = 100.0
+RSS_TRACE_M = 50.0  # the details JSON samples RSS every this much true path (rss_trace_mb)
 MAX_PEAK_RSS_MB = 3072.0
 MAX_RSS_GROWTH = 0.15
 MAX_RECORDING_MB = 150.0
@@ -60,7 +62,8 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
     rec = RerunRecorder(out / "recording.rrd", recording_name=sc.name, **sol_recording(sc))
     t0, cpu0 = time.perf_counter(), time.process_time()
     mission = Mission(sc, rec)
-    probe = {"path_m": 0.0, "last": None, "rss_100m_mb": None}
+    probe = {"path_m": 0.0, "last": None, "rss_100m_mb": None, "next_trace_m": 0.0}
+    trace: list[tuple[float, float]] = []  # (true path m, RSS MB) every RSS_TRACE_M: where memory grows
 
     def on_tick(_obs: object, truth: object) -> None:
         p = truth.position_xyz_m  # type: ignore[attr-defined]
@@ -69,6 +72,9 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
         probe["last"] = p[:2].copy()
         if probe["rss_100m_mb"] is None and probe["path_m"] >= RSS_PROBE_M:
             probe["rss_100m_mb"] = round(rss_mb(), 1)
+        if probe["path_m"] >= probe["next_trace_m"]:
+            trace.append((round(probe["path_m"], 1), round(rss_mb(), 1)))
+            probe["next_trace_m"] += RSS_TRACE_M
 
     mission.tick_listeners.append(on_tick)
     try:
@@ -92,6 +98,7 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
         "rss_100m_mb": probe["rss_100m_mb"],
         "rss_end_mb": round(rss_mb(), 1),
+        "rss_trace_mb": trace,
         "recording_mb": round((out / "recording.rrd").stat().st_size / 1e6, 2),
         "dr_error_pct": metrics.dr_error_pct,
         "vo_error_pct": metrics.vo_error_pct,
