@@ -51,7 +51,7 @@ import numpy as np
 
 from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_table
 from rover_sim.sim.terramechanics import pack_inputs  # noqa: F401 - the same input layout as the default law
-from rover_sim.sim.wr_kernel import OUT_SINKAGE, table_lookup, wr_wheels
+from rover_sim.sim.wr_kernel import table_lookup, wr_wheels
 
 __all__ = [
     "BEDROCK", "DRIFT", "MATERIALS", "MIXED", "SAND", "SoilParams", "WheelParams", "WheelSoilLaw", "WheelSoilState",
@@ -252,7 +252,7 @@ class WheelSoilLaw:
 
     def sinkage_m(self, normal_force_n: float, material: int, slip: float) -> float:
         """Steady-state sinkage under ``normal_force_n`` at ``slip`` (step 2)."""
-        return self.lookup(material, normal_force_n, slip)[OUT_SINKAGE]
+        return self.lookup(material, normal_force_n, slip)[0]
 
     def evaluate(self, inputs: list[float], material: list[int], dt_s: float) -> list[float]:
         """Soil forces and torques: a flat list ``[fx, fy, fz, T] * n_wheels`` (world-frame force on the wheel at
