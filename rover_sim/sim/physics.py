@@ -182,7 +182,6 @@ class RoverSim:
 
     def _set_terrain_lookups(self) -> None:
         terrain = self.terrain
-        self._nrow, self._ncol = np.shape(terrain.heights_m)
         self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
         self._origin_x, self._origin_y = terrain.origin_xy_m
         self._inv_cell = 1.0 / terrain.cell_size_m
