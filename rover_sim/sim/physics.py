@@ -15,6 +15,7 @@ from rover_sim.sim.soil_kernel import apply_wheel_wrenches, materials_under
 from rover_sim.sim.stream import release_freed_memory
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
 from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
+from rover_sim.sim.wr_kernel import wr_wrenches
 
 if TYPE_CHECKING:
     from rover_sim.sim.deform import DeformableTerrain
@@ -134,8 +135,8 @@ class RoverSim:
         self._sd_heading = slice(a0 + 60, a0 + 78)
         self._sd_rate = slice(a0 + 78, a0 + 84)
         self._sd_view = self.data.sensordata[a0 : a0 + 84]
-        self._wrench: list[tuple[float, ...]] = [(0.0,) * 6] * 6
         self._forces = np.zeros((6, 3))  # compiled default law: forces and materials per wheel
+        self._forces_wr = np.zeros((6, 4))  # the Wong-Reece law's forces and axle torques
         self._mats = np.zeros(6, dtype=np.int64)
         assert m.sensor_adr[m.sensor("wheel_rr_rate").id] == a0 + 83, "sensor layout changed in rover.xml"
         self._imu_gyro = self._sensor_slice("imu_gyro")
@@ -181,13 +182,10 @@ class RoverSim:
 
     def _set_terrain_lookups(self) -> None:
         terrain = self.terrain
-        self._mat_list = np.asarray(terrain.materials, dtype=int).tolist()
-        self._h_list = np.asarray(terrain.heights_m, dtype=float).tolist()
-        self._nrow, self._ncol = np.shape(terrain.heights_m)
         self._half_x, self._half_y = terrain.half_x_m, terrain.half_y_m
         self._origin_x, self._origin_y = terrain.origin_xy_m
         self._inv_cell = 1.0 / terrain.cell_size_m
-        # the same lookup as arrays, for the compiled default law (sim/soil_kernel.py)
+        # the material lookup for the compiled laws (sim/soil_kernel.py)
         self._mat_grid = np.ascontiguousarray(terrain.materials, dtype=np.int64)
         self._h_grid = np.ascontiguousarray(terrain.heights_m, dtype=float)
         self._grid = np.array([self._origin_x, self._origin_y, self._half_x, self._half_y, self._inv_cell], float)
@@ -324,39 +322,15 @@ class RoverSim:
         apply_wheel_wrenches(sd, self._forces, self._wheel_body, self._xipos, self._xfrc)
 
     def _apply_soil_law_wr(self, dt: float) -> None:
-        """The experimental Wong-Reece law: forces plus the soil's torque about each axle; then the ruts."""
-        sd = self._sd_view.tolist()
-        pos = [(sd[k], sd[k + 1], sd[k + 2]) for k in (4, 11, 18, 25, 32, 39)]
-        law = self.law
-        mats = self._material_under(pos)
-        f = law.evaluate(sd, mats, dt)
-        com = self._xipos[self._wheel_body].tolist()
-        axles = law.axles
-        wrench = self._wrench
-        for w in range(6):
-            o = 4 * w
-            fx, fy, fz, T = f[o], f[o + 1], f[o + 2], f[o + 3]
-            (px, py, pz), (cx, cy, cz) = pos[w], com[w]
-            rx, ry, rz = px - cx, py - cy, pz - cz
-            mx, my, mz = ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx
-            # the soil's torque about the axle is the law's T (resisting the spin), not the lever of the net force
-            ax, ay, az = axles[w]
-            corr = -T - (mx * ax + my * ay + mz * az)
-            wrench[w] = (fx, fy, fz, mx + corr * ax, my + corr * ay, mz + corr * az)
-        self._xfrc[self._wheel_body] = wrench
+        """The experimental Wong-Reece law, compiled (sim/wr_kernel.py): forces plus the soil's torque about each
+        axle, applied as wrenches; then the ruts."""
+        sd = self._sd_view
+        materials_under(sd, self._h_grid, self._mat_grid, self._grid, ROCK_CONTACT_MARGIN_M, MATERIAL_ROCK,
+                        self._mats)  # fmt: skip
+        self.law.evaluate_into(sd, self._mats, dt, self._forces_wr)
+        wr_wrenches(sd, self._forces_wr, self.law.axles, self._wheel_body, self._xipos, self._xfrc)
         if self.deform is not None:
-            self.deform.after_law(self, pos, mats)
-
-    def _material_under(self, pos: list[tuple[float, float, float]]) -> list[int]:
-        """Material index under each wheel contact; a contact well above the heightfield is on a rock."""
-        out = []
-        ox, oy = self._origin_x, self._origin_y
-        for x, y, z in pos:
-            j = min(max(int((x - ox + self._half_x) * self._inv_cell + 0.5), 0), self._ncol - 1)
-            i = min(max(int((y - oy + self._half_y) * self._inv_cell + 0.5), 0), self._nrow - 1)
-            on_rock = z > self._h_list[i][j] + ROCK_CONTACT_MARGIN_M
-            out.append(MATERIAL_ROCK if on_rock else self._mat_list[i][j])
-        return out
+            self.deform.after_law(self, sd, self._mats)
 
     def safety_issue(
         self, margin_m: float = 0.3, slide_speed_m_s: float = 0.15, window_s: float = 1.0

@@ -36,8 +36,9 @@ and compliant rim, Hegedus bulldozing), tabulated once per material over (load, 
 Output per wheel: the force on the wheel (world frame, at the contact point) and the soil's resisting torque about
 the axle ``T`` (the drive motor supplies it).
 
-Implementation note: numpy's per-call overhead on 6-element arrays would cost 5-10x the MuJoCo step, so
-:meth:`WheelSoilLaw.evaluate` is a plain-float loop; state and outputs are exposed as numpy arrays for logging.
+Implementation: the per-step arithmetic (steps 1-5 and the table look-up) is compiled with numba in
+:mod:`rover_sim.sim.wr_kernel`, bit-identical to the plain-float Python loop it replaced; this class holds the
+tables, constants and state arrays and calls it.
 """
 
 from __future__ import annotations
@@ -48,8 +49,9 @@ from functools import lru_cache
 
 import numpy as np
 
-from rover_sim.sim.soil_tables import N_LOAD, N_SLIP, SoilParams, WheelParams, build_table
+from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_table
 from rover_sim.sim.terramechanics import pack_inputs  # noqa: F401 - the same input layout as the default law
+from rover_sim.sim.wr_kernel import table_lookup, wr_wheels
 
 __all__ = [
     "BEDROCK", "DRIFT", "MATERIALS", "MIXED", "SAND", "SoilParams", "WheelParams", "WheelSoilLaw", "WheelSoilState",
@@ -139,10 +141,9 @@ DRIFT = SoilParams(
 # Index order matches terrains.Material (SAND=0, BEDROCK=1, MIXED=2, DRIFT=3); rocks are treated as BEDROCK.
 MATERIALS: tuple[SoilParams, ...] = (SAND, BEDROCK, MIXED, DRIFT)
 
-BOW_M = 0.002  # advance over which the front-loaded (resisting) stress distribution forms
-_VEL_FILTER_S = 0.1  # window of the net motion that renews the soil under the patch
-_ROLLING_EPS_M_S = 1e-4  # rim speeds below this count as "not rolling" for the reported slip ratio
-_BRISTLE_DAMPING_RATIO = 0.7  # damping ratio of the shear spring (initial stiffness F_max / 2K) per wheel
+# BOW_M (the advance over which the front-loaded, resisting stress distribution forms) and the other per-step
+# constants live with the compiled arithmetic in rover_sim/sim/wr_kernel.py.
+_STATE_ROWS = ("jx", "jy", "bow", "patch", "presink")  # rows of WheelSoilLaw.state_arrays()
 
 
 @dataclass
@@ -159,8 +160,9 @@ class WheelSoilState:
 
 
 @lru_cache(maxsize=16)
-def _table(soil: SoilParams, wheel: WheelParams) -> tuple[list[tuple[float, ...]], float]:
-    return build_table(soil, wheel)
+def _table(soil: SoilParams, wheel: WheelParams) -> tuple[np.ndarray, float]:
+    rows, max_load = build_table(soil, wheel)
+    return np.array(rows, dtype=float), max_load
 
 
 class WheelSoilLaw:
@@ -181,12 +183,12 @@ class WheelSoilLaw:
         self.mass_share_kg = mass_share_kg  # vehicle mass per wheel, for the shear-state damping
         self.n_wheels = n_wheels
         self.materials = materials
-        self._consts = []
+        tables, consts = [], []
         for m in materials:
             rows, max_load = _table(m, self.wheel)
-            self._consts.append(
+            tables.append(rows)
+            consts.append(
                 (
-                    rows,
                     (N_LOAD - 1) / math.sqrt(max_load),
                     math.tan(math.radians(m.friction_angle_deg)),
                     m.cohesion_pa,
@@ -196,35 +198,40 @@ class WheelSoilLaw:
                     m.n1,
                 )
             )
+        self._tables = np.ascontiguousarray(tables)  # (materials, N_SLIP * N_LOAD, 7)
+        self._consts = np.array(consts, dtype=float)  # (materials, 7): wr_kernel.C_* columns
         self.reset()
 
     def reset(self) -> None:
         n = self.n_wheels
-        self._jx = [0.0] * n  # shear displacement states (m)
-        self._jy = [0.0] * n
-        self._bow = [0.0] * n  # bow state of the compaction resistance (m)
-        self._vf = [[0.0, 0.0, 0.0] for _ in range(n)]  # low-passed rim, longitudinal and lateral speeds
-        self._patch = [0.1] * n
-        self.presink_m = [0.0] * n  # rut depth of earlier passes at each wheel (set by the deformable terrain)
-        self._out = [[0.0] * n for _ in range(7)]  # W, z, slip, f_long, f_lat, contact, torque
-        self.axles = [(0.0, 1.0, 0.0)] * n  # wheel axle (lateral) unit vectors of the last evaluation, world
+        self._state = np.zeros((len(_STATE_ROWS), n))  # jx, jy (m), bow (m), patch length (m), presink (m)
+        self._state[3] = 0.1
+        self._vf = np.zeros((n, 3))  # low-passed rim, longitudinal and lateral speeds
+        self._out = np.zeros((7, n))  # W, z, slip, f_long, f_lat, contact, torque (wr_kernel.OUT_* rows)
+        self.axles = np.tile([0.0, 1.0, 0.0], (n, 1))  # wheel axle (lateral) unit vectors of the last evaluation
+
+    @property
+    def presink_m(self) -> np.ndarray:
+        """(n,) rut depth of earlier passes ahead of each wheel (a live view, set by the deformable terrain)."""
+        return self._state[4]
 
     @property
     def j_m(self) -> np.ndarray:
         """(n, 2) shear displacement state (longitudinal, lateral), metres."""
-        return np.array([self._jx, self._jy]).T
+        return self._state[:2].T.copy()
 
     @property
     def patch_m(self) -> np.ndarray:
         """(n,) contact length of the last evaluation, metres."""
-        return np.array(self._patch)
+        return self._state[3].copy()
 
-    def out_state(self) -> list[list[float]]:
-        """The last evaluation's raw per-wheel lists (load, sinkage, slip, f_long, f_lat, contact, torque)."""
+    def out_state(self) -> np.ndarray:
+        """The last evaluation's raw per-wheel rows (load, sinkage, slip, f_long, f_lat, contact, torque), live."""
         return self._out
 
-    def patch_length(self, wheel: int) -> float:
-        return self._patch[wheel]
+    def state_arrays(self) -> np.ndarray:
+        """The live (5, n) state: rows jx, jy, bow, patch length, presink (for the compiled deformable terrain)."""
+        return self._state
 
     @property
     def state(self) -> WheelSoilState:
@@ -241,25 +248,7 @@ class WheelSoilLaw:
 
     def lookup(self, material: int, load_n: float, slip: float) -> tuple[float, ...]:
         """Steady state at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, Fb/W)."""
-        rows, inv_du = self._consts[material][:2]
-        u = math.sqrt(max(load_n, 0.0)) * inv_du
-        iu = min(int(u), N_LOAD - 2)
-        fu = min(u - iu, 1.0)
-        v = (min(max(slip, -1.0), 1.0) + 1.0) * 0.5 * (N_SLIP - 1)
-        iv = min(int(v), N_SLIP - 2)
-        fv = v - iv
-        k = iv * N_LOAD + iu
-        a, b, c, d = rows[k], rows[k + 1], rows[k + N_LOAD], rows[k + N_LOAD + 1]
-        w00, w01, w10, w11 = (1 - fv) * (1 - fu), (1 - fv) * fu, fv * (1 - fu), fv * fu
-        return (
-            w00 * a[0] + w01 * b[0] + w10 * c[0] + w11 * d[0],
-            w00 * a[1] + w01 * b[1] + w10 * c[1] + w11 * d[1],
-            w00 * a[2] + w01 * b[2] + w10 * c[2] + w11 * d[2],
-            w00 * a[3] + w01 * b[3] + w10 * c[3] + w11 * d[3],
-            w00 * a[4] + w01 * b[4] + w10 * c[4] + w11 * d[4],
-            w00 * a[5] + w01 * b[5] + w10 * c[5] + w11 * d[5],
-            w00 * a[6] + w01 * b[6] + w10 * c[6] + w11 * d[6],
-        )
+        return table_lookup(self._tables[material], float(self._consts[material, 0]), float(load_n), float(slip))
 
     def sinkage_m(self, normal_force_n: float, material: int, slip: float) -> float:
         """Steady-state sinkage under ``normal_force_n`` at ``slip`` (step 2)."""
@@ -273,117 +262,14 @@ class WheelSoilLaw:
         ``[found, Fx, Fy, Fz, px, py, pz]`` (the wheel's contact force *on the ground*, zero when not in contact, and
         the contact point), then the wheel-centre velocities (3 per wheel), the rolling directions (3 per wheel)
         and the spin rates (1 per wheel). ``material`` is the soil index per wheel. Build it with
-        :func:`pack_inputs` outside the hot loop.
+        :func:`pack_inputs`. The simulator calls :meth:`evaluate_into` on its sensor array instead.
         """
-        r = self.radius_m
-        nw = self.n_wheels
-        out_W, out_z, out_slip, out_fl, out_ft, out_c, out_tq = self._out
-        out = [0.0] * (4 * nw)
-        exp, sqrt = math.exp, math.sqrt
-        alpha = dt_s / (_VEL_FILTER_S + dt_s)
-        lookup = self.lookup
-        axles = self.axles
-        for w in range(nw):
-            c = 7 * w
-            nx, ny, nz = -inputs[c + 1], -inputs[c + 2], -inputs[c + 3]
-            W = sqrt(nx * nx + ny * ny + nz * nz)
-            if W < 1e-6:
-                # Lifted off (a bounce): the sheared soil stays where it is and is only renewed as the wheel
-                # advances over it (no source without contact); resetting it would lose the mobilised thrust
-                # at every bounce, and bounces are more frequent the faster the rover drives.
-                self._lift_off(w, inputs, dt_s, alpha)
-                out_W[w] = out_z[w] = out_fl[w] = out_ft[w] = out_c[w] = out_tq[w] = 0.0
-                out_slip[w] = math.nan
-                continue
-            nx, ny, nz = nx / W, ny / W, nz / W
-            k = 7 * nw + 3 * w
-            h = k + 3 * nw
-            hx, hy, hz = inputs[h], inputs[h + 1], inputs[h + 2]
-            hn = hx * nx + hy * ny + hz * nz
-            lx, ly, lz = hx - hn * nx, hy - hn * ny, hz - hn * nz
-            ln = sqrt(lx * lx + ly * ly + lz * lz)
-            lx, ly, lz = lx / ln, ly / ln, lz / ln
-            tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
-            vx_w, vy_w, vz_w = inputs[k], inputs[k + 1], inputs[k + 2]
-            v_x = vx_w * lx + vy_w * ly + vz_w * lz
-            v_y = vx_w * tx + vy_w * ty + vz_w * tz
-            v_rim = inputs[13 * nw + w] * r
-            mat = material[w]
-            _, _, tan_phi, coh, K, Ky, n0, n1 = self._consts[mat]
-            # step 1: shear states, renewed by the net advance over the soil
-            vf = self._vf[w]
-            vf[0] += alpha * (v_rim - vf[0])
-            vf[1] += alpha * (v_x - vf[1])
-            vf[2] += alpha * (v_y - vf[2])
-            V = max(abs(vf[0]), abs(vf[1]), abs(vf[2]))
-            L = self._patch[w]
-            a = V / L
-            if a * dt_s > 1e-9:
-                decay = exp(-a * dt_s)
-                gain = (1.0 - decay) / a
-            else:
-                decay, gain = 1.0, dt_s
-            jx0, jy0 = self._jx[w], self._jy[w]
-            jx = min(max(jx0 * decay + (v_rim - v_x) * gain, -L), L)
-            jy = min(max(jy0 * decay - v_y * gain, -L), L)
-            self._jx[w], self._jy[w] = jx, jy
-            i_m = jx / L
-            # step 2: the steady-state stresses at the mobilised slip
-            z, hn_, rn, tn, Lp, A, fbn = lookup(mat, W, i_m)
-            self._patch[w] = Lp
-            lat = abs(jy) / Lp
-            if lat > abs(i_m):  # lateral sinkage
-                z = lookup(mat, W, lat)[0]
-            # step 3: compaction resistance as a reaction, reduced in an earlier rut
-            bow = min(max(self._bow[w] + v_x * dt_s, -BOW_M), BOW_M)
-            self._bow[w] = bow
-            zp = self.presink_m[w]
-            # Bekker: compaction resistance is the work of compacting to z, b k z^(n+1) / (n+1); in a rut already
-            # compacted to z_p only the part from z_p to z is new (Bekker 1969; Wong 2008, multipass)
-            fresh = 1.0 - (zp / z) ** (1.0 + n0 + n1 * abs(i_m)) if z > zp else 0.0
-            f_long = W * (hn_ - rn * fresh * bow / BOW_M)
-            # step 4: lateral shear with its own modulus, mean mobilisation over the patch, plus side-wall bulldozing
-            f_max = coh * A + W * tan_phi
-            q = abs(jy) / Ky
-            mob = 1.0 - (1.0 - exp(-q)) / q if q > 1e-6 else 0.5 * q
-            f_lat = mob * f_max * (1.0 if jy >= 0 else -1.0)
-            f_t = sqrt(W * W * hn_ * hn_ + f_lat * f_lat)
-            if f_t > f_max:  # longitudinal and lateral shear share the strength
-                f_lat *= f_max / f_t
-            f_lat += mob * W * fbn * (1.0 if jy >= 0 else -1.0)
-            # step 5: damping of the shear springs (LuGre sigma_1), zero at steady state
-            sigma1 = _BRISTLE_DAMPING_RATIO * 2.0 * sqrt(f_max / (2.0 * K) * self.mass_share_kg)
-            f_long += sigma1 * (jx - jx0) / dt_s
-            f_lat += sigma1 * (K / Ky) * (jy - jy0) / dt_s
-            f_cap = f_max + W * fbn + W * rn
-            f_t = sqrt(f_long * f_long + f_lat * f_lat)
-            if f_t > f_cap:
-                f_long, f_lat = f_long * f_cap / f_t, f_lat * f_cap / f_t
-            torque = W * r * tn
-            o = 4 * w
-            out[o] = f_long * lx + f_lat * tx
-            out[o + 1] = f_long * ly + f_lat * ty
-            out[o + 2] = f_long * lz + f_lat * tz
-            out[o + 3] = torque
-            axles[w] = (tx, ty, tz)
-            out_W[w], out_z[w], out_fl[w], out_ft[w], out_c[w], out_tq[w] = W, z, f_long, f_lat, 1.0, torque
-            out_slip[w] = (v_rim - v_x) / v_rim if abs(v_rim) > _ROLLING_EPS_M_S else math.nan
-        return out
+        forces = np.zeros((self.n_wheels, 4))
+        self.evaluate_into(np.asarray(inputs, dtype=float), np.asarray(material, dtype=np.int64), dt_s, forces)
+        return forces.ravel().tolist()
 
-    def _lift_off(self, w: int, inputs: list[float], dt_s: float, alpha: float) -> None:
-        """Shear states of wheel ``w`` while it is out of contact: renewed by its advance, no source."""
-        nw = self.n_wheels
-        k = 7 * nw + 3 * w
-        h = k + 3 * nw
-        vx_w, vy_w = inputs[k], inputs[k + 1]
-        hx, hy = inputs[h], inputs[h + 1]
-        hn = math.hypot(hx, hy) or 1.0
-        v_x = (vx_w * hx + vy_w * hy) / hn
-        v_y = (-vx_w * hy + vy_w * hx) / hn
-        vf = self._vf[w]
-        vf[0] += alpha * (inputs[13 * nw + w] * self.radius_m - vf[0])
-        vf[1] += alpha * (v_x - vf[1])
-        vf[2] += alpha * (v_y - vf[2])
-        decay = math.exp(-max(abs(vf[0]), abs(vf[1]), abs(vf[2])) / self._patch[w] * dt_s)
-        self._jx[w] *= decay
-        self._jy[w] *= decay
+    def evaluate_into(self, sd: np.ndarray, material: np.ndarray, dt_s: float, forces: np.ndarray) -> None:
+        """:meth:`evaluate` on arrays: ``sd`` the sensor block, ``material`` (n,) int64, forces and torques into
+        (n, 4). Steps 1-5 of the module docstring, compiled (:func:`rover_sim.sim.wr_kernel.wr_wheels`)."""
+        wr_wheels(sd, material, self._tables, self._consts, self._state, self._vf, self._out, self.axles, forces,
+                  dt_s, self.radius_m, self.mass_share_kg)  # fmt: skip
