@@ -26,13 +26,13 @@ BRISTLE_DAMPING_RATIO = 0.7  # damping ratio of the shear spring (initial stiffn
 
 
 @njit(cache=True)
-def _hi(a: float, b: float) -> float:
+def py_max(a: float, b: float) -> float:
     """Python's ``max(a, b)``: ``a`` unless ``b > a``."""
     return b if b > a else a
 
 
 @njit(cache=True)
-def _lo(a: float, b: float) -> float:
+def py_min(a: float, b: float) -> float:
     """Python's ``min(a, b)``: ``a`` unless ``b < a``."""
     return b if b < a else a
 
@@ -97,10 +97,10 @@ def bekker_wheels(
         sink_coef, expo, tan_phi, cb, K = consts[m, 0], consts[m, 1], consts[m, 2], consts[m, 3], consts[m, 4]
         ss, tread, n, rc_coef = consts[m, 5], consts[m, 6], consts[m, 7], consts[m, 8]
         # steps 1-3: sinkage (slip-sinkage from the mobilised slip j/L), patch length, shear strength
-        i_mob = _lo(_hi(jx_m[w] / patch_m[w], 0.0), 1.0)
+        i_mob = py_min(py_max(jx_m[w] / patch_m[w], 0.0), 1.0)
         z = (sink_coef * W) ** expo * (1.0 + ss * i_mob)
-        v_rim = sd[13 * nw + w] * ((r - _lo(z, 0.5 * r)) if rolling_radius else r)
-        L = r * math.acos(_hi(1.0 - z / r, -1.0)) + tread
+        v_rim = sd[13 * nw + w] * ((r - py_min(z, 0.5 * r)) if rolling_radius else r)
+        L = r * math.acos(py_max(1.0 - z / r, -1.0)) + tread
         patch_m[w] = L
         f_max = cb * L + W * tan_phi
         # step 4: shear displacement, exact integration of dj/dt = v_slip - (V/L) j with V = |r omega|
@@ -114,7 +114,7 @@ def bekker_wheels(
         jx = jx0 * decay + (v_rim - v_x) * gain
         jy = jy0 * decay - v_y * gain
         j_cap = J_CAP_K * K
-        jx, jy = _lo(_hi(jx, -j_cap), j_cap), _lo(_hi(jy, -j_cap), j_cap)
+        jx, jy = py_min(py_max(jx, -j_cap), j_cap), py_min(py_max(jy, -j_cap), j_cap)
         jx_m[w], jy_m[w] = jx, jy
         # step 5: Janosi-Hanamoto mobilisation averaged over the patch, along the shear displacement
         j = math.sqrt(jx * jx + jy * jy)
@@ -133,7 +133,7 @@ def bekker_wheels(
         if f_t > f_max:  # the soil cannot carry more than its shear strength
             f_long, f_lat = f_long * f_max / f_t, f_lat * f_max / f_t
         # step 6: compaction resistance, bounded
-        r_c = _lo(rc_coef * z ** (n + 1.0), 0.5 * W)
+        r_c = py_min(rc_coef * z ** (n + 1.0), 0.5 * W)
         f_long -= r_c * math.tanh(v_x / RC_SMOOTHING_M_S)
         forces[w, 0] = f_long * lx + f_lat * tx
         forces[w, 1] = f_long * ly + f_lat * ty
@@ -159,8 +159,8 @@ def materials_under(
     for w in range(out.shape[0]):
         c = 7 * w
         x, y, z = sd[c + 4], sd[c + 5], sd[c + 6]
-        j = int(_lo(_hi(int((x - ox + half_x) * inv_cell + 0.5), 0), ncol - 1))
-        i = int(_lo(_hi(int((y - oy + half_y) * inv_cell + 0.5), 0), nrow - 1))
+        j = int(py_min(py_max(int((x - ox + half_x) * inv_cell + 0.5), 0), ncol - 1))
+        i = int(py_min(py_max(int((y - oy + half_y) * inv_cell + 0.5), 0), nrow - 1))
         out[w] = rock_material if z > heights_m[i, j] + rock_margin_m else material_grid[i, j]
 
 

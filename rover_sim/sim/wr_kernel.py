@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from rover_sim.sim.soil_kernel import py_max, py_min
 from rover_sim.sim.soil_tables import N_LOAD, N_SLIP
 
 BOW_M = 0.002  # advance over which the front-loaded (resisting) stress distribution forms
@@ -37,18 +38,6 @@ C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1 = range(7)
 # entries of the deformable terrain's float parameters (DeformableTerrain)
 P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_SPHERE_R = range(8)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for a double
-
-
-@njit(cache=True)
-def _hi(a: float, b: float) -> float:
-    """Python's ``max(a, b)``: ``a`` unless ``b > a``."""
-    return b if b > a else a
-
-
-@njit(cache=True)
-def _lo(a: float, b: float) -> float:
-    """Python's ``min(a, b)``: ``a`` unless ``b < a``."""
-    return b if b < a else a
 
 
 @njit(cache=True)
@@ -112,10 +101,10 @@ def py_hypot(x: float, y: float) -> float:
 def table_lookup(rows: np.ndarray, inv_du: float, load_n: float, slip: float) -> tuple[float, ...]:
     """Bilinear read of one material's table ``rows`` (``soil_tables.build_table``, as an (N_SLIP * N_LOAD, 7)
     array) at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, Fb/W)."""
-    u = math.sqrt(_hi(load_n, 0.0)) * inv_du
+    u = math.sqrt(py_max(load_n, 0.0)) * inv_du
     iu = min(int(u), N_LOAD - 2)
-    fu = _lo(u - iu, 1.0)
-    v = (_lo(_hi(slip, -1.0), 1.0) + 1.0) * 0.5 * (N_SLIP - 1)
+    fu = py_min(u - iu, 1.0)
+    v = (py_min(py_max(slip, -1.0), 1.0) + 1.0) * 0.5 * (N_SLIP - 1)
     iv = min(int(v), N_SLIP - 2)
     fv = v - iv
     k = iv * N_LOAD + iu
@@ -148,7 +137,7 @@ def _lift_off(sd: np.ndarray, w: int, nw: int, vf: np.ndarray, jx_m: np.ndarray,
     vf[w, 0] += alpha * (sd[13 * nw + w] * radius_m - vf[w, 0])
     vf[w, 1] += alpha * (v_x - vf[w, 1])
     vf[w, 2] += alpha * (v_y - vf[w, 2])
-    decay = math.exp(-_hi(_hi(abs(vf[w, 0]), abs(vf[w, 1])), abs(vf[w, 2])) / patch_m[w] * dt_s)
+    decay = math.exp(-py_max(py_max(abs(vf[w, 0]), abs(vf[w, 1])), abs(vf[w, 2])) / patch_m[w] * dt_s)
     jx_m[w] *= decay
     jy_m[w] *= decay
 
@@ -213,7 +202,7 @@ def wr_wheels(
         vf[w, 0] += alpha * (v_rim - vf[w, 0])
         vf[w, 1] += alpha * (v_x - vf[w, 1])
         vf[w, 2] += alpha * (v_y - vf[w, 2])
-        V = _hi(_hi(abs(vf[w, 0]), abs(vf[w, 1])), abs(vf[w, 2]))
+        V = py_max(py_max(abs(vf[w, 0]), abs(vf[w, 1])), abs(vf[w, 2]))
         L = patch_m[w]
         a = V / L
         if a * dt_s > 1e-9:
@@ -222,8 +211,8 @@ def wr_wheels(
         else:
             decay, gain = 1.0, dt_s
         jx0, jy0 = jx_m[w], jy_m[w]
-        jx = _lo(_hi(jx0 * decay + (v_rim - v_x) * gain, -L), L)
-        jy = _lo(_hi(jy0 * decay - v_y * gain, -L), L)
+        jx = py_min(py_max(jx0 * decay + (v_rim - v_x) * gain, -L), L)
+        jy = py_min(py_max(jy0 * decay - v_y * gain, -L), L)
         jx_m[w], jy_m[w] = jx, jy
         i_m = jx / L
         # step 2: the steady-state stresses at the mobilised slip
@@ -233,7 +222,7 @@ def wr_wheels(
         if lat > abs(i_m):  # lateral sinkage
             z = table_lookup(rows, inv_du, W, lat)[0]
         # step 3: compaction resistance as a reaction, reduced in an earlier rut (Bekker's compaction work)
-        bow = _lo(_hi(bow_m[w] + v_x * dt_s, -BOW_M), BOW_M)
+        bow = py_min(py_max(bow_m[w] + v_x * dt_s, -BOW_M), BOW_M)
         bow_m[w] = bow
         zp = presink_m[w]
         fresh = 1.0 - (zp / z) ** (1.0 + n0 + n1 * abs(i_m)) if z > zp else 0.0
@@ -313,9 +302,9 @@ def write_rut(h: np.ndarray, h0: np.ndarray, soft: np.ndarray, hfield: np.ndarra
     cell, base, scale, width, r = p[P_CELL], p[P_BASE], p[P_SCALE], p[P_WIDTH], p[P_SPHERE_R]
     # behind: the patch; ahead: the patch plus the travel until the next write and a cell
     back, front, half_w = 0.5 * lp + 0.5 * cell, 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
-    shoulder = _hi(half_w, r)
-    reach = shoulder + _hi(BERM_CELLS * cell, BERM_SPREAD * z)
-    span = int(math.ceil(_hi(front, reach) / cell)) + 1
+    shoulder = py_max(half_w, r)
+    reach = shoulder + py_max(BERM_CELLS * cell, BERM_SPREAD * z)
+    span = int(math.ceil(py_max(front, reach) / cell)) + 1
     ci, cj = _cell_of(px, py, p, nrow, ncol)
     displaced = 0.0
     berm = np.empty((2 * span + 1) * (2 * span + 1), dtype=np.int64)
@@ -395,7 +384,7 @@ def deform_after_law(
         lp = patch_m[w]
         lead = 0.5 * lp + UPDATE_M + 2.5 * cell  # beyond this wheel's own footprint
         i, j = _cell_of(px + lead * hx, py + lead * hy, p, nrow, ncol)
-        presink_m[w] = _hi(h0[i, j] - h[i, j], 0.0)
+        presink_m[w] = py_max(h0[i, j] - h[i, j], 0.0)
         lx, ly, lz = last[w, 0], last[w, 1], last[w, 2]
         z = zf[w] = zf[w] + alpha * (law_out[1, w] - zf[w])
         if (px - lx) ** 2 + (py - ly) ** 2 < UPDATE_M * UPDATE_M and z < lz + 0.001:
