@@ -67,6 +67,7 @@ from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
 from nav.stereo.pipeline import (
     compute_disparity,
     disparity_to_xyz_cam,
+    pipeline_threads,
     range_image,
     row_search_window,
     sad_search,
@@ -89,6 +90,7 @@ __all__ = [
     "edge_mask",
     "left_right_mask",
     "match_quality_mask",
+    "pipeline_threads",
     "quantise",
     "range_image",
     "row_search_window",
