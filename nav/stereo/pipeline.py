@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -230,17 +230,26 @@ class _Pipeline:
         quantise_into(bp_right, params, engine.right_q)
         hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side
         t0, t1 = max(v0 - hw, 0), min(v1 + hw, h_px)
-        texture_into(bp_left[t0:t1], params.texture_threshold, params.window_px, self.ok4[t0:t1], self.scratch3[t0:t1])
+        texture_args = (bp_left[t0:t1], params.texture_threshold, params.window_px, self.ok4[t0:t1])
+        texture_args += (self.scratch3[t0:t1],)
+        # (with a worker: the texture there while the search runs here; the checks wait for it)
+        texture = texture_into(*texture_args) if pool is None else pool.submit(texture_into, *texture_args)
         bands = engine.plan(window)
-        parts = _split_rows(window, v0, v1, 2 if pool is not None and not engine.rolling else 1)
-        if len(parts) == 1:
-            self.search_rows(bands, v0, v1, 0, gain_left, disparity)
-        else:  # 3-5 on the rows' top part in the worker, the bottom part here (disjoint rows of every buffer)
-            job = pool.submit(self.search_rows, clip_bands(bands, *parts[0]), *parts[0], 0, gain_left, disparity)
-            try:
-                self.search_rows(clip_bands(bands, *parts[1]), *parts[1], 1, gain_left, disparity)
-            finally:
-                job.result()
+        split = pool is not None and not engine.rolling and self.shape[0] * self.shape[1] >= _SPLIT_MIN_PX
+        parts = _split_rows(window, v0, v1, 2 if split else 1)
+        try:
+            if len(parts) == 1:
+                self.search_rows(bands, v0, v1, 0, gain_left, disparity, texture)
+            else:  # 3-5 on the rows' top part in the worker, the bottom part here (disjoint rows of every buffer)
+                part0 = clip_bands(bands, *parts[0])
+                job = pool.submit(self.search_rows, part0, *parts[0], 0, gain_left, disparity, texture)
+                try:
+                    self.search_rows(clip_bands(bands, *parts[1]), *parts[1], 1, gain_left, disparity, texture)
+                finally:
+                    job.result()
+        finally:
+            if isinstance(texture, Future):
+                texture.result()
         ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
         out = disparity[rows]
         if params.discontinuity_px > 0 or params.speckle_window_size > 0:
@@ -257,9 +266,19 @@ class _Pipeline:
         cv2.copyTo(self.nan[rows], bad, out)
         return disparity
 
-    def search_rows(self, bands: list, v0: int, v1: int, part: int, gain_left: float, disparity: np.ndarray) -> None:
-        """Steps 3-5 on rows ``v0:v1`` (row-local: parts of the rows may run in concurrent threads). Leaves the
-        disparity there, ``ok``/``bad`` (the checks passed/failed) and, if a later filter needs it, ``fixed``."""
+    def search_rows(
+        self,
+        bands: list,
+        v0: int,
+        v1: int,
+        part: int,
+        gain_left: float,
+        disparity: np.ndarray,
+        texture: Future | np.ndarray,
+    ) -> None:
+        """Steps 3-5 on rows ``v0:v1`` (row-local: parts of the rows may run in concurrent threads; ``texture``: the
+        texture check's job, waited for before its result is read). Leaves the disparity there, ``ok``/``bad`` (the
+        checks passed/failed) and, if a later filter needs it, ``fixed``."""
         params, engine = self.params, self.engine
         engine.search_rows(bands, v0, v1, part)
         none_index = -float(params.lr_max_diff_px + 2)  # (fails the left-right test by itself)
@@ -278,6 +297,8 @@ class _Pipeline:
         np.copyto(hi, np.subtract(window.hi[rows, None], 1, out=self.hi_col[rows], casting="unsafe"))
         cv2.bitwise_and(cv2.compare(index, lo, cv2.CMP_GE, ok), cv2.compare(index, hi, cv2.CMP_LE, tmp), ok)
         cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
+        if isinstance(texture, Future):
+            texture.result()
         cv2.bitwise_and(ok, self.ok4[rows], dst=ok)  # texture (run has filled it on these rows)
         if params.max_sad_ratio > 0:  # match quality, from the texture's local mean square
             limit = sad_limit(self.scratch3[rows], params, gain_left, scratch)
@@ -308,9 +329,11 @@ def _split_rows(window: RowWindow, v0: int, v1: int, n_parts: int) -> list[tuple
 
 
 def pipeline_threads(shape: tuple[int, int]) -> int:
-    """Threads :func:`compute_disparity` uses on images of ``shape``: 2 (the caller's and one worker's) from
-    ``_THREADED_MIN_PX`` pixels up where OpenCV may use two or more (``cv2.getNumThreads()``), else 1."""
-    return 2 if cv2.getNumThreads() >= 2 and shape[0] * shape[1] >= _THREADED_MIN_PX else 1
+    """Threads :func:`compute_disparity` runs on: 2 (the caller's and one worker's) where OpenCV may use two or more
+    (``cv2.getNumThreads()``), else 1. The worker band-passes the left image beside the right one and runs the
+    texture check beside the search; from ``_SPLIT_MIN_PX`` pixels up it also takes half of the search's rows."""
+    del shape  # (the same at every size; the row split depends on it, see above)
+    return 2 if cv2.getNumThreads() >= 2 else 1
 
 
 def _worker_pool(shape: tuple[int, int]) -> ThreadPoolExecutor | None:
@@ -324,10 +347,10 @@ def _worker_pool(shape: tuple[int, int]) -> ThreadPoolExecutor | None:
         return _POOL[0]
 
 
-# Smaller images run on one thread: at 256x256 a call is ~700 OpenCV calls of a few microseconds each, and with two
-# threads taking turns at the GIL it ran 10-15 % slower (bench stereo pairs, shared 2-core machine, load 2-3); at
-# 1024x1024 the calls are long and the two threads overlap.
-_THREADED_MIN_PX = 512 * 512
+# Smaller images search all rows on the calling thread: at 256x256 the search is ~350 OpenCV calls of a few
+# microseconds each, and with two threads taking turns at the GIL it ran 10-15 % slower (bench stereo pairs, shared
+# 2-core machine, load 1-3); at 1024x1024 the calls are long and the two threads overlap.
+_SPLIT_MIN_PX = 512 * 512
 _POST_ROW_COST = 8  # steps 3-5 after the search cost about as much per row as this many disparities
 _MIN_PART_ROWS = 16
 _POOL: list[ThreadPoolExecutor] = []  # the worker pool, once created
