@@ -71,6 +71,7 @@ from nav.stereo.pipeline import (
     range_image,
     row_search_window,
     sad_search,
+    splits_search_rows,
     stereobm_baseline,
     xyz_cam_to_rover,
 )
@@ -95,6 +96,7 @@ __all__ = [
     "range_image",
     "row_search_window",
     "sad_search",
+    "splits_search_rows",
     "speckle_mask",
     "stereobm_baseline",
     "subpixel_quadratic",

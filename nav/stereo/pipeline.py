@@ -206,7 +206,7 @@ class _Pipeline:
 
     def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
         params, h_px = self.params, self.shape[0]
-        pool = _worker_pool(self.shape)
+        pool = _worker_pool()
         if pool is None:
             bp_left = bandpass_into(left_u8, params, self.bp_left, self.scratch)  # 1. band-pass
         else:  # the left image in the worker, the right one here
@@ -235,7 +235,7 @@ class _Pipeline:
         # (with a worker: the texture there while the search runs here; the checks wait for it)
         texture = texture_into(*texture_args) if pool is None else pool.submit(texture_into, *texture_args)
         bands = engine.plan(window)
-        split = pool is not None and not engine.rolling and self.shape[0] * self.shape[1] >= _SPLIT_MIN_PX
+        split = pool is not None and not engine.rolling and splits_search_rows(self.shape)
         parts = _split_rows(window, v0, v1, 2 if split else 1)
         try:
             if len(parts) == 1:
@@ -328,18 +328,24 @@ def _split_rows(window: RowWindow, v0: int, v1: int, n_parts: int) -> list[tuple
     return [(v0, cut), (cut, v1)]
 
 
-def pipeline_threads(shape: tuple[int, int]) -> int:
+def pipeline_threads() -> int:
     """Threads :func:`compute_disparity` runs on: 2 (the caller's and one worker's) where OpenCV may use two or more
     (``cv2.getNumThreads()``), else 1. The worker band-passes the left image beside the right one and runs the
-    texture check beside the search; from ``_SPLIT_MIN_PX`` pixels up it also takes half of the search's rows."""
-    del shape  # (the same at every size; the row split depends on it, see above)
+    texture check beside the search; on large images it also takes half of the search's rows
+    (:func:`splits_search_rows`)."""
     return 2 if cv2.getNumThreads() >= 2 else 1
 
 
-def _worker_pool(shape: tuple[int, int]) -> ThreadPoolExecutor | None:
+def splits_search_rows(shape: tuple[int, int]) -> bool:
+    """Whether steps 3-5 on images of ``shape`` run half of their rows on the worker (from ``_SPLIT_MIN_PX`` pixels
+    up, with two threads; the rolling search keeps one)."""
+    return pipeline_threads() >= 2 and shape[0] * shape[1] >= _SPLIT_MIN_PX
+
+
+def _worker_pool() -> ThreadPoolExecutor | None:
     """The one worker thread beside the caller's (created once), or None where the pipeline runs entirely on the
     calling thread (see :func:`pipeline_threads`)."""
-    if pipeline_threads(shape) < 2:
+    if pipeline_threads() < 2:
         return None
     with _POOL_LOCK:
         if not _POOL:

@@ -232,15 +232,16 @@ def test_threads_do_not_change_the_disparity(
     n_threads = cv2.getNumThreads()
     try:
         cv2.setNumThreads(1)
-        assert pipeline_mod.pipeline_threads(shape) == 1
+        assert pipeline_mod.pipeline_threads() == 1 and not pipeline_mod.splits_search_rows(shape)
         alone = compute_disparity(left, right, params)
         assert parts == [0]
         cv2.setNumThreads(2)
-        assert pipeline_mod.pipeline_threads(shape) == 2
+        assert pipeline_mod.pipeline_threads() == 2
+        assert pipeline_mod.splits_search_rows(shape) == (shape[0] * shape[1] >= 512 * 512)
         for _ in range(3):
             parts.clear()
             np.testing.assert_array_equal(compute_disparity(left, right, params), alone)
-            split = shape[0] * shape[1] >= pipeline_mod._SPLIT_MIN_PX and engine_mode == "volume"
+            split = pipeline_mod.splits_search_rows(shape) and engine_mode == "volume"
             assert sorted(parts) == ([0, 1] if split else [0])
     finally:
         cv2.setNumThreads(n_threads)
