@@ -71,7 +71,6 @@ from nav.stereo.pipeline import (
     range_image,
     row_search_window,
     sad_search,
-    splits_search_rows,
     stereobm_baseline,
     xyz_cam_to_rover,
 )
@@ -96,7 +95,6 @@ __all__ = [
     "range_image",
     "row_search_window",
     "sad_search",
-    "splits_search_rows",
     "speckle_mask",
     "stereobm_baseline",
     "subpixel_quadratic",

@@ -206,7 +206,7 @@ class _Pipeline:
 
     def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
         params, h_px = self.params, self.shape[0]
-        pool = _worker_pool()
+        pool = _worker_pool(self.shape)
         if pool is None:
             bp_left = bandpass_into(left_u8, params, self.bp_left, self.scratch)  # 1. band-pass
         else:  # the left image in the worker, the right one here
@@ -235,8 +235,7 @@ class _Pipeline:
         # (with a worker: the texture there while the search runs here; the checks wait for it)
         texture = texture_into(*texture_args) if pool is None else pool.submit(texture_into, *texture_args)
         bands = engine.plan(window)
-        split = pool is not None and not engine.rolling and splits_search_rows(self.shape)
-        parts = _split_rows(window, v0, v1, 2 if split else 1)
+        parts = _split_rows(window, v0, v1, 2 if pool is not None and not engine.rolling else 1)
         try:
             if len(parts) == 1:
                 self.search_rows(bands, v0, v1, 0, gain_left, disparity, texture)
@@ -328,24 +327,18 @@ def _split_rows(window: RowWindow, v0: int, v1: int, n_parts: int) -> list[tuple
     return [(v0, cut), (cut, v1)]
 
 
-def pipeline_threads() -> int:
-    """Threads :func:`compute_disparity` runs on: 2 (the caller's and one worker's) where OpenCV may use two or more
-    (``cv2.getNumThreads()``), else 1. The worker band-passes the left image beside the right one and runs the
-    texture check beside the search; on large images it also takes half of the search's rows
-    (:func:`splits_search_rows`)."""
-    return 2 if cv2.getNumThreads() >= 2 else 1
+def pipeline_threads(shape: tuple[int, int]) -> int:
+    """Threads :func:`compute_disparity` runs on for images of ``shape``: 2 (the caller's and one worker's) from
+    ``_THREADED_MIN_PX`` pixels up where OpenCV may use two or more (``cv2.getNumThreads()``), else 1. The worker
+    band-passes the left image beside the right one, runs the texture check beside the search and takes half of the
+    search's rows (steps 3-5; the rolling search keeps all rows on one thread)."""
+    return 2 if cv2.getNumThreads() >= 2 and shape[0] * shape[1] >= _THREADED_MIN_PX else 1
 
 
-def splits_search_rows(shape: tuple[int, int]) -> bool:
-    """Whether steps 3-5 on images of ``shape`` run half of their rows on the worker (from ``_SPLIT_MIN_PX`` pixels
-    up, with two threads; the rolling search keeps one)."""
-    return pipeline_threads() >= 2 and shape[0] * shape[1] >= _SPLIT_MIN_PX
-
-
-def _worker_pool() -> ThreadPoolExecutor | None:
+def _worker_pool(shape: tuple[int, int]) -> ThreadPoolExecutor | None:
     """The one worker thread beside the caller's (created once), or None where the pipeline runs entirely on the
     calling thread (see :func:`pipeline_threads`)."""
-    if pipeline_threads() < 2:
+    if pipeline_threads(shape) < 2:
         return None
     with _POOL_LOCK:
         if not _POOL:
@@ -353,10 +346,11 @@ def _worker_pool() -> ThreadPoolExecutor | None:
         return _POOL[0]
 
 
-# Smaller images search all rows on the calling thread: at 256x256 the search is ~350 OpenCV calls of a few
-# microseconds each, and with two threads taking turns at the GIL it ran 10-15 % slower (bench stereo pairs, shared
-# 2-core machine, load 1-3); at 1024x1024 the calls are long and the two threads overlap.
-_SPLIT_MIN_PX = 512 * 512
+# Smaller images run on the calling thread alone: at 256x256 a call is ~700 OpenCV calls of a few microseconds each,
+# and a worker taking turns with it at the GIL cost more than it saved (bench stereo pairs, shared 2-core machine,
+# load 2-3: 10-15 % slower with the rows split, 1-6 % with only the band-pass and texture beside; StereoBM gained
+# nothing from its second thread there either); at 1024x1024 the calls are long and the two threads overlap.
+_THREADED_MIN_PX = 512 * 512
 _POST_ROW_COST = 8  # steps 3-5 after the search cost about as much per row as this many disparities
 _MIN_PART_ROWS = 16
 _POOL: list[ThreadPoolExecutor] = []  # the worker pool, once created

@@ -25,7 +25,6 @@ from nav.stereo import (
     StereoParams,
     compute_disparity,
     pipeline_threads,
-    splits_search_rows,
     stereobm_baseline,
 )
 from rover_sim.bench import write_json
@@ -241,8 +240,7 @@ def _bench_profile(profile: str, resolutions_px: tuple[int, ...], repeats: int) 
         threads = per_res[res]["threads"]
         print(
             f"[{profile}] speed ratio ours/StereoBM @{res} px = {ratio:.2f} (acceptance <= {bar}; threads: ours "
-            f"{threads['ours']}{' (search rows split)' if threads['ours_rows_split'] else ''}, "
-            f"StereoBM {threads['stereobm']})"
+            f"{threads['ours']}, StereoBM {threads['stereobm']})"
         )
     better = beats_stereobm(agg)
     print(f"[{profile}] denser and fewer bad-1px than StereoBM (256 px): {'yes' if better else 'NO'}")
@@ -251,11 +249,10 @@ def _bench_profile(profile: str, resolutions_px: tuple[int, ...], repeats: int) 
     return agg, all_rows, pairs_256
 
 
-def threads_used(shape: tuple[int, int]) -> dict:
-    """Threads each side may run on for images of ``shape``: ours from :func:`nav.stereo.pipeline_threads` (and
-    whether the search's rows are split between them), StereoBM's from OpenCV's thread pool
-    (``cv2.getNumThreads()``: StereoBM splits its rows among them)."""
-    return {"ours": pipeline_threads(), "ours_rows_split": splits_search_rows(shape), "stereobm": cv2.getNumThreads()}
+def threads_used(shape: tuple[int, int]) -> dict[str, int]:
+    """Threads each side may run on for images of ``shape``: ours from :func:`nav.stereo.pipeline_threads`,
+    StereoBM's from OpenCV's thread pool (``cv2.getNumThreads()``: StereoBM splits its rows among them)."""
+    return {"ours": pipeline_threads(shape), "stereobm": cv2.getNumThreads()}
 
 
 def _time_ms(fn, repeats: int = 15) -> float:

@@ -217,7 +217,7 @@ def ground_like_pair(h_px: int, w_px: int, seed: int = 0) -> tuple[np.ndarray, n
 def test_threads_do_not_change_the_disparity(
     engine_mode: str, shape: tuple[int, int], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The worker thread (band-pass, texture and, from 512x512 px up, half of the search's rows) gives the same bits
+    """The worker thread (from 512x512 px up: band-pass, texture and half of the search's rows) gives the same bits
     as the calling thread alone, on every call; the row split really runs where it should."""
     left, right = ground_like_pair(*shape)
     params = StereoParams(num_disparities=48, window_px=7)
@@ -232,16 +232,16 @@ def test_threads_do_not_change_the_disparity(
     n_threads = cv2.getNumThreads()
     try:
         cv2.setNumThreads(1)
-        assert pipeline_mod.pipeline_threads() == 1 and not pipeline_mod.splits_search_rows(shape)
+        assert pipeline_mod.pipeline_threads(shape) == 1
         alone = compute_disparity(left, right, params)
         assert parts == [0]
         cv2.setNumThreads(2)
-        assert pipeline_mod.pipeline_threads() == 2
-        assert pipeline_mod.splits_search_rows(shape) == (shape[0] * shape[1] >= 512 * 512)
+        threaded = pipeline_mod.pipeline_threads(shape) == 2
+        assert threaded == (shape[0] * shape[1] >= 512 * 512)
         for _ in range(3):
             parts.clear()
             np.testing.assert_array_equal(compute_disparity(left, right, params), alone)
-            split = pipeline_mod.splits_search_rows(shape) and engine_mode == "volume"
+            split = threaded and engine_mode == "volume"
             assert sorted(parts) == ([0, 1] if split else [0])
     finally:
         cv2.setNumThreads(n_threads)
