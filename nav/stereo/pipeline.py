@@ -211,9 +211,11 @@ class _Pipeline:
             bp_left = bandpass_into(left_u8, params, self.bp_left, self.scratch)  # 1. band-pass
         else:  # the left image in the worker, the right one here
             job = pool.submit(bandpass_into, left_u8, params, self.bp_left, self.scratch)
-        bp_right = bandpass_into(right_u8, params, self.bp_right, self.scratch_right)
-        if pool is not None:
-            bp_left = job.result()
+        try:
+            bp_right = bandpass_into(right_u8, params, self.bp_right, self.scratch_right)
+        finally:
+            if pool is not None:
+                bp_left = job.result()
         window = self.row_window(bp_left, bp_right)  # 2. row windows
         searched = np.nonzero(window.lo <= window.hi)[0]
         disparity = np.empty(self.shape, np.float32)  # the result: a fresh array
