@@ -45,7 +45,11 @@ shared 2-core machine (load 2-3): the full-resolution search about a third of it
 score read-back and blob filter about a tenth each. Any size up to 4096 px a side runs (window sums in int32 where
 float32 would round; the SAD volume is replaced by the scores beside each running winner when it would exceed the
 budget), e.g. full-resolution 1024x1024 navcam pairs, 741x500 or 640x480 (Rocky 8) images; the keys of large images
-are not all exact yet (see :class:`nav.stereo.sad.Engine`).
+are not all exact yet (see :class:`nav.stereo.sad.Engine`). From 512x512 px up a call runs on two threads (the
+caller's and one worker's, :func:`pipeline_threads`; OpenCV releases the GIL): the left band-pass beside the right
+one, the texture check beside the search, and the search with steps 3-5 split into two row ranges (disjoint rows of
+every buffer, exact sums: the same bits as one thread). Smaller images stay on one thread: their many short calls
+lose more to GIL hand-offs than the overlap gains.
 
 Modules, in the order of the steps: :mod:`nav.stereo.params` (parameters and result types),
 :mod:`nav.stereo.bandpass` (step 1, and the texture check), :mod:`nav.stereo.sad` (the SAD engine, step 3, and
@@ -67,6 +71,7 @@ from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
 from nav.stereo.pipeline import (
     compute_disparity,
     disparity_to_xyz_cam,
+    pipeline_threads,
     range_image,
     row_search_window,
     sad_search,
@@ -89,6 +94,7 @@ __all__ = [
     "edge_mask",
     "left_right_mask",
     "match_quality_mask",
+    "pipeline_threads",
     "quantise",
     "range_image",
     "row_search_window",

@@ -6,7 +6,9 @@
 
 from __future__ import annotations
 
+import os
 import threading
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import cv2
 import numpy as np
@@ -15,7 +17,7 @@ from nav.camera import PinholeCamera, StereoRig
 from nav.stereo.bandpass import bandpass_into, quantise_gain, quantise_into, texture_into
 from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle_filter, uniqueness
 from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
-from nav.stereo.sad import Engine, subpixel
+from nav.stereo.sad import Engine, clip_bands, subpixel
 
 MAX_SIDE_PX = 4096  # images up to this side (larger ones: bin them; the SAD engine's buffers grow as H * W)
 # A parabola curvature (SAD units) this large means a neighbour's score was NO_MATCH (not searched).
@@ -70,6 +72,7 @@ def sad_search(
     np.copyto(engine.left_q, left_q)
     np.copyto(engine.right_q, right_q)
     engine.search(window)
+    engine.forget_stacks()  # (the caller's images may exceed the quantised range the stack's exactness assumes)
     index, right_index = engine.winners()
     cost, cost_minus, cost_plus, second = engine.scores(index)
     found = engine.found()
@@ -115,6 +118,7 @@ class _Pipeline:
         self.bp_left, self.bp_right, self.scratch, self.scratch2, self.scratch3, self.curvature, self.offset = (
             f32() for _ in range(7)
         )
+        self.scratch_right = f32()  # (the right image's band-pass runs beside the left one's)
         self.ok, self.ok2, self.ok3, self.ok2x, self.ok4 = (u8() for _ in range(5))
         self.lo, self.hi = f32(), f32()
         self.lo_col, self.hi_col = np.empty((shape[0], 1), np.float32), np.empty((shape[0], 1), np.float32)
@@ -202,8 +206,16 @@ class _Pipeline:
 
     def run(self, left_u8: np.ndarray, right_u8: np.ndarray) -> np.ndarray:
         params, h_px = self.params, self.shape[0]
-        bp_left = bandpass_into(left_u8, params, self.bp_left, self.scratch)  # 1. band-pass
-        bp_right = bandpass_into(right_u8, params, self.bp_right, self.scratch)
+        pool = _worker_pool(self.shape)
+        if pool is None:
+            bp_left = bandpass_into(left_u8, params, self.bp_left, self.scratch)  # 1. band-pass
+        else:  # the left image in the worker, the right one here
+            job = pool.submit(bandpass_into, left_u8, params, self.bp_left, self.scratch)
+        try:
+            bp_right = bandpass_into(right_u8, params, self.bp_right, self.scratch_right)
+        finally:
+            if pool is not None:
+                bp_left = job.result()
         window = self.row_window(bp_left, bp_right)  # 2. row windows
         searched = np.nonzero(window.lo <= window.hi)[0]
         disparity = np.empty(self.shape, np.float32)  # the result: a fresh array
@@ -218,42 +230,31 @@ class _Pipeline:
         gain_left = quantise_gain(bp_left, params)
         quantise_into(bp_left, params, engine.left_q, gain_left)
         quantise_into(bp_right, params, engine.right_q)
-        engine.search(window, (v0, v1))
-        none_index = -float(params.lr_max_diff_px + 2)  # (fails the left-right test by itself)
-        index, right_index = engine.winners(v0, v1, none_index)
-        cost, cost_minus, cost_plus, second = engine.scores(index)
-        curvature, offset = self.curvature[rows], self.offset[rows]
-        subpixel(cost_minus, cost, cost_plus, curvature, offset)  # 4. sub-pixel
-        # 5. checks. Edge: lo < index < hi, and both neighbours' scores exist (else the curvature is huge)
-        ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
-        scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
-        lo, hi = self.lo[rows], self.hi[rows]
-        # indices and curvatures are integers: lo + 1 <= index <= hi - 1 (per-row bounds: float32 columns broadcast;
-        # two compares: inRange with array bounds takes twice as long)
-        np.copyto(lo, np.add(window.lo[rows, None], 1, out=self.lo_col[rows], casting="unsafe"))
-        np.copyto(hi, np.subtract(window.hi[rows, None], 1, out=self.hi_col[rows], casting="unsafe"))
-        cv2.bitwise_and(cv2.compare(index, lo, cv2.CMP_GE, ok), cv2.compare(index, hi, cv2.CMP_LE, tmp), ok)
-        cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
         hw = params.half_window_px  # texture: the band-passed rows with half a window more on each side
         t0, t1 = max(v0 - hw, 0), min(v1 + hw, h_px)
-        texture = texture_into(
-            bp_left[t0:t1], params.texture_threshold, params.window_px, self.ok4[t0:t1], self.scratch3[t0:t1]
-        )
-        cv2.bitwise_and(ok, texture[v0 - t0 : v1 - t0], dst=ok)
-        if params.max_sad_ratio > 0:  # match quality, from the texture's local mean square
-            limit = sad_limit(self.scratch3[v0:v1], params, gain_left, scratch)
-            cv2.bitwise_and(ok, cv2.compare(cost, limit, cv2.CMP_LE, dst=tmp), dst=ok)
-        cv2.bitwise_and(ok, uniqueness(cost, second, curvature, params.uniqueness_ratio, tmp, scratch), dst=ok)
-        cv2.bitwise_and(
-            ok, left_right(index, right_index, params.lr_max_diff_px, 0, tmp, scratch, scratch2, tmp2, none_index), ok
-        )
+        texture_args = (bp_left[t0:t1], params.texture_threshold, params.window_px, self.ok4[t0:t1])
+        texture_args += (self.scratch3[t0:t1],)
+        # (with a worker: the texture there while the search runs here; the checks wait for it)
+        texture = texture_into(*texture_args) if pool is None else pool.submit(texture_into, *texture_args)
+        bands = engine.plan(window)
+        parts = _split_rows(window, v0, v1, 2 if pool is not None and not engine.rolling else 1)
+        try:
+            if len(parts) == 1:
+                self.search_rows(bands, v0, v1, 0, gain_left, disparity, texture)
+            else:  # 3-5 on the rows' top part in the worker, the bottom part here (disjoint rows of every buffer)
+                part0 = clip_bands(bands, *parts[0])
+                job = pool.submit(self.search_rows, part0, *parts[0], 0, gain_left, disparity, texture)
+                try:
+                    self.search_rows(clip_bands(bands, *parts[1]), *parts[1], 1, gain_left, disparity, texture)
+                finally:
+                    job.result()
+        finally:
+            if isinstance(texture, Future):
+                texture.result()
+        ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
         out = disparity[rows]
-        cv2.add(index, offset, dst=out)
-        if params.min_disparity:
-            cv2.add(out, float(params.min_disparity), dst=out)
-        cv2.bitwise_not(ok, dst=bad)
         if params.discontinuity_px > 0 or params.speckle_window_size > 0:
-            fixed = cv2.addWeighted(out, 16.0, out, 0.0, 0.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
+            fixed = self.fixed[rows]
         if params.discontinuity_px > 0:
             keep = discontinuity(fixed, bad, params.discontinuity_px, hw, tmp, tmp2, self.fixed2[rows])
             cv2.bitwise_not(cv2.bitwise_and(ok, keep, dst=ok), dst=bad)
@@ -265,6 +266,98 @@ class _Pipeline:
             cv2.compare(fixed, -16, cv2.CMP_EQ, bad)
         cv2.copyTo(self.nan[rows], bad, out)
         return disparity
+
+    def search_rows(
+        self,
+        bands: list,
+        v0: int,
+        v1: int,
+        part: int,
+        gain_left: float,
+        disparity: np.ndarray,
+        texture: Future | np.ndarray,
+    ) -> None:
+        """Steps 3-5 on rows ``v0:v1`` (row-local: parts of the rows may run in concurrent threads; ``texture``: the
+        texture check's job, waited for before its result is read). Leaves the disparity there, ``ok``/``bad`` (the
+        checks passed/failed) and, if a later filter needs it, ``fixed``."""
+        params, engine = self.params, self.engine
+        engine.search_rows(bands, v0, v1, part)
+        none_index = -float(params.lr_max_diff_px + 2)  # (fails the left-right test by itself)
+        index, right_index = engine.winners(v0, v1, none_index)
+        rows = slice(v0, v1)
+        cost, cost_minus, cost_plus, second = engine.scores(index, rows)
+        curvature, offset = self.curvature[rows], self.offset[rows]
+        subpixel(cost_minus, cost, cost_plus, curvature, offset)  # 4. sub-pixel
+        # 5. checks. Edge: lo < index < hi, and both neighbours' scores exist (else the curvature is huge)
+        ok, tmp, tmp2, bad = self.ok[rows], self.ok2[rows], self.ok2x[rows], self.ok3[rows]
+        scratch, scratch2 = self.scratch[rows], self.scratch2[rows]
+        lo, hi, window = self.lo[rows], self.hi[rows], engine.window
+        # indices and curvatures are integers: lo + 1 <= index <= hi - 1 (per-row bounds: float32 columns broadcast;
+        # two compares: inRange with array bounds takes twice as long)
+        np.copyto(lo, np.add(window.lo[rows, None], 1, out=self.lo_col[rows], casting="unsafe"))
+        np.copyto(hi, np.subtract(window.hi[rows, None], 1, out=self.hi_col[rows], casting="unsafe"))
+        cv2.bitwise_and(cv2.compare(index, lo, cv2.CMP_GE, ok), cv2.compare(index, hi, cv2.CMP_LE, tmp), ok)
+        cv2.bitwise_and(ok, cv2.inRange(curvature, 1.0, _CURVATURE_LIMIT - 1.0, dst=tmp), dst=ok)
+        if isinstance(texture, Future):
+            texture.result()
+        cv2.bitwise_and(ok, self.ok4[rows], dst=ok)  # texture (run has filled it on these rows)
+        if params.max_sad_ratio > 0:  # match quality, from the texture's local mean square
+            limit = sad_limit(self.scratch3[rows], params, gain_left, scratch)
+            cv2.bitwise_and(ok, cv2.compare(cost, limit, cv2.CMP_LE, dst=tmp), dst=ok)
+        cv2.bitwise_and(ok, uniqueness(cost, second, curvature, params.uniqueness_ratio, tmp, scratch), dst=ok)
+        cv2.bitwise_and(
+            ok, left_right(index, right_index, params.lr_max_diff_px, 0, tmp, scratch, scratch2, tmp2, none_index), ok
+        )
+        out = disparity[rows]
+        cv2.add(index, offset, dst=out)
+        if params.min_disparity:
+            cv2.add(out, float(params.min_disparity), dst=out)
+        cv2.bitwise_not(ok, dst=bad)
+        if params.discontinuity_px > 0 or params.speckle_window_size > 0:
+            cv2.addWeighted(out, 16.0, out, 0.0, 0.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
+
+
+def _split_rows(window: RowWindow, v0: int, v1: int, n_parts: int) -> list[tuple[int, int]]:
+    """``v0:v1`` cut into ``n_parts`` row ranges of about equal work: a row costs its searched disparities plus
+    about ``_POST_ROW_COST`` more for the steps after the search. Ranges shorter than ``_MIN_PART_ROWS``: one."""
+    if n_parts < 2 or v1 - v0 < 2 * _MIN_PART_ROWS:
+        return [(v0, v1)]
+    work = np.maximum(window.hi[v0:v1] - window.lo[v0:v1] + 1, 0) + _POST_ROW_COST
+    cum = np.cumsum(work)
+    cut = v0 + int(np.searchsorted(cum, cum[-1] / 2))
+    cut = min(max(cut, v0 + _MIN_PART_ROWS), v1 - _MIN_PART_ROWS)
+    return [(v0, cut), (cut, v1)]
+
+
+def pipeline_threads(shape: tuple[int, int]) -> int:
+    """Threads :func:`compute_disparity` runs on for images of ``shape``: 2 (the caller's and one worker's) from
+    ``_THREADED_MIN_PX`` pixels up where OpenCV may use two or more (``cv2.getNumThreads()``), else 1. The worker
+    band-passes the left image beside the right one, runs the texture check beside the search and takes half of the
+    search's rows (steps 3-5; the rolling search keeps all rows on one thread)."""
+    return 2 if cv2.getNumThreads() >= 2 and shape[0] * shape[1] >= _THREADED_MIN_PX else 1
+
+
+def _worker_pool(shape: tuple[int, int]) -> ThreadPoolExecutor | None:
+    """The one worker thread beside the caller's (created once), or None where the pipeline runs entirely on the
+    calling thread (see :func:`pipeline_threads`)."""
+    if pipeline_threads(shape) < 2:
+        return None
+    with _POOL_LOCK:
+        if not _POOL:
+            _POOL.append(ThreadPoolExecutor(max_workers=1, thread_name_prefix="nav-stereo"))
+        return _POOL[0]
+
+
+# Smaller images run on the calling thread alone: at 256x256 a call is ~700 OpenCV calls of a few microseconds each,
+# and a worker taking turns with it at the GIL cost more than it saved (bench stereo pairs, shared 2-core machine,
+# load 2-3: 10-15 % slower with the rows split, 1-6 % with only the band-pass and texture beside; StereoBM gained
+# nothing from its second thread there either); at 1024x1024 the calls are long and the two threads overlap.
+_THREADED_MIN_PX = 512 * 512
+_POST_ROW_COST = 8  # steps 3-5 after the search cost about as much per row as this many disparities
+_MIN_PART_ROWS = 16
+_POOL: list[ThreadPoolExecutor] = []  # the worker pool, once created
+_POOL_LOCK = threading.Lock()
+os.register_at_fork(after_in_child=_POOL.clear)  # (a forked child has no worker thread: it makes its own)
 
 
 _THREAD = threading.local()

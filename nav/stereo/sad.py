@@ -8,6 +8,8 @@ buffers are shared with :func:`nav.stereo.compute_disparity`), so it lives in :m
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -24,6 +26,18 @@ _EXACT_FLOAT32 = 2**24
 # ----------------------------------------------------------------------------------------------------------------
 # Step 3: SAD search
 # ----------------------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _Stack:
+    """One set of stacking buffers of :meth:`Engine.search_rows` (see :meth:`Engine._stack_runs`): the stacked
+    |L - R| bands, their integral image, its sums over the window's rows and, per disparity, the two column views of
+    those sums whose difference is the window sum."""
+
+    stack: np.ndarray
+    integral: np.ndarray
+    band: np.ndarray
+    views: list[tuple[np.ndarray, np.ndarray]]
 
 
 class Engine:
@@ -89,9 +103,7 @@ class Engine:
         self.stack_rows = min(rows_f32, n_stack) if exact else max(band_rows, min(2048, n_stack))
         self.sdepth = cv2.CV_32F if exact else cv2.CV_32S
         depth = np.float32 if exact else np.int32
-        self.stack = np.zeros((self.stack_rows, w_px + hw), np.uint8)
-        self.integral = np.empty((self.stack_rows + 1, w_px + hw + 1), depth)
-        self.band = np.empty((self.stack_rows, w_px + hw + 1), depth)
+        self.depth = depth
         self.window = RowWindow.full(h_px, num_disparities)
         self.u_grid, self.v_grid = grids(shape)
         f32, u8 = (lambda: np.empty(shape, np.float32)), (lambda: np.empty(shape, np.uint8))
@@ -102,11 +114,12 @@ class Engine:
         self.no_match = np.full(shape, NO_MATCH, np.float32)
         self.left_q, self.right_q = u8(), u8()  # the images to search: the caller writes them
         self.views = self._views()
+        self.parts: list[_Stack] = [self._new_stack()]  # stacking buffers, one per concurrent row part
 
     def _views(self) -> list[tuple]:
         """Per disparity: its shift, tag and the column slices of every buffer it touches (row-sliced per band)."""
         h_px, w_px = self.shape
-        hw, win = self.window_px // 2, self.window_px
+        hw = self.window_px // 2
         views: list[tuple] = []
         for i in range(self.num_disparities):
             s = self.min_disparity + i
@@ -121,8 +134,6 @@ class Engine:
                     i / TAG,
                     self.left_q[:, s:],
                     self.right_q[:, : w_px - s],
-                    self.band[:, s + win :],
-                    self.band[:, s : s + n_cols],
                     self.costs[plane, :, s + hw :],
                     self.best[c, :, s + hw :],
                     self.second[c, :, s + hw :],
@@ -150,15 +161,30 @@ class Engine:
             self.plus_run,
         )
 
+    def plan(self, window: RowWindow | None) -> list[list[tuple[int, int]]]:
+        """Set the search's row windows (all disparities if None); per disparity, the bands of rows to search."""
+        self.window = window if window is not None else RowWindow.full(self.shape[0], self.num_disparities)
+        return _row_bands(self.window, self.num_disparities)
+
     def search(self, window: RowWindow | None, rows: tuple[int, int] | None = None) -> None:
         """Search ``self.left_q`` against ``self.right_q`` (quantised images, written by the caller).
 
         ``rows``: the running minima are reset on these rows only (all rows that search anything must be inside;
         decode only these rows).
         """
-        h_px = self.shape[0]
-        self.window = window = window if window is not None else RowWindow.full(h_px, self.num_disparities)
-        v0, v1 = rows if rows is not None else (0, h_px)
+        bands = self.plan(window)
+        self.search_rows(bands, *(rows if rows is not None else (0, self.shape[0])))
+
+    def search_rows(self, bands: list[list[tuple[int, int]]], v0: int, v1: int, part: int = 0) -> None:
+        """The search of ``bands`` (from :meth:`plan`, all inside rows ``v0:v1``: see :func:`clip_bands`), the running
+        minima reset on rows ``v0:v1``, stacking in buffer set ``part``.
+
+        Row ranges searched with different parts may run concurrently (threads): they write disjoint rows of the
+        shared buffers. Every key is an exact integer sum plus its tag, so the results do not depend on how the
+        rows are split. The rolling search carries state across rows' columns: one part, all rows.
+        """
+        if self.rolling and (part or any(a < v0 or b > v1 for runs in bands for a, b in runs)):
+            raise ValueError("the rolling search runs in one part covering every searched row")
         self.best[:, v0:v1].fill(NO_MATCH)
         self.second[:, v0:v1].fill(NO_MATCH)
         self.best_right[v0:v1].fill(NO_MATCH)
@@ -166,25 +192,28 @@ class Engine:
             for buf in (self.best_run, self.minus_run, self.plus_run):
                 buf[v0:v1].fill(NO_MATCH)
             self.updated[:, v0:v1].fill(0)
+        while len(self.parts) <= part:
+            self.parts.append(self._new_stack())
+        buffers = self.parts[part]
         subtract, add, vmin, vmax, f32 = cv2.subtract, cv2.add, cv2.min, cv2.max, cv2.CV_32F
-        bands = list(zip(self.views, _row_bands(window, self.num_disparities), strict=False))
-        runs_all = [(view, a, b) for view, runs in bands for a, b in runs]
+        # (views stop at the first disparity with no column left in the image)
+        bands_v = list(zip(self.views, buffers.views, bands, strict=False))
+        runs_all = [(view, a, b) for view, _, runs in bands_v for a, b in runs]
         offsets: list[int] = []  # each run's first row in the stack (filled a stack at a time)
         last = None
         k = 0
-        # (views stop at the first disparity with no column left in the image)
-        for view, runs in bands:
-            _, tag, _, _, band_hi, band_lo, costs, best, second, tmp, best_right, rolling = view
+        for view, (band_hi, band_lo), runs in bands_v:
+            _, tag, _, _, costs, best, second, tmp, best_right, rolling = view
             for a, b in runs:
                 if k == len(offsets):
-                    self._stack_runs(runs_all, k, offsets)
+                    self._stack_runs(runs_all, k, offsets, buffers)
                 off, n = offsets[k], b - a
                 k += 1
                 key = costs[a:b]  # (positional arguments: OpenCV parses keywords more slowly)
                 subtract(band_hi[off : off + n], band_lo[off : off + n], key, None, f32)  # exact window sums ...
                 add(key, tag, key)  # ... then the tag (a fused addWeighted rounded it once band_lo passed 2^16)
                 best_c, second_c = best[a:b], second[a:b]
-                vmin(second_c, vmax(best_c, key, tmp[:n]), second_c)
+                vmin(second_c, vmax(best_c, key, tmp[a:b]), second_c)
                 vmin(best_c, key, best_c)
                 right_c = best_right[a:b]
                 vmin(right_c, key, right_c)
@@ -199,15 +228,34 @@ class Engine:
             for a, b in last[1]:
                 cv2.copyTo(self.no_match[a:b, : plus.shape[1]], updated[a:b], plus[a:b])
 
-    def _stack_runs(self, runs: list[tuple], k0: int, offsets: list[int]) -> None:
-        """|L - R| of runs ``k0, k0 + 1, ...`` (as many as the stack holds), each with hw rows more above and below,
-        stacked; then one integral image and one subtraction give the sums over ``window_px`` rows of all of them
-        (row ``offsets[k] + j`` of ``band``: run k's row a + j). A column sum never mixes two runs. The columns
-        left of a run's shift are zeroed, so its row sums are the same numbers as from an integral image starting at
-        the shift."""
+    def forget_stacks(self) -> None:
+        """Zero the stacks: later searches' stale columns (see :meth:`_stack_runs`) then hold nothing above
+        ``max_value`` even if this search's images did."""
+        for buffers in self.parts:
+            buffers.stack.fill(0)
+
+    def _new_stack(self) -> _Stack:
         h_px, w_px = self.shape
         hw, win = self.window_px // 2, self.window_px
-        stack, absdiff = self.stack, cv2.absdiff
+        band = np.empty((self.stack_rows, w_px + hw + 1), self.depth)
+        views = [(band[:, view[0] + win :], band[:, view[0] : w_px - hw]) for view in self.views]
+        return _Stack(
+            np.zeros((self.stack_rows, w_px + hw), np.uint8),
+            np.empty((self.stack_rows + 1, w_px + hw + 1), self.depth),
+            band,
+            views,
+        )
+
+    def _stack_runs(self, runs: list[tuple], k0: int, offsets: list[int], buffers: _Stack) -> None:
+        """|L - R| of runs ``k0, k0 + 1, ...`` (as many as the stack holds), each with hw rows more above and below,
+        stacked; then one integral image and one subtraction give the sums over ``window_px`` rows of all of them
+        (row ``offsets[k] + j`` of ``band``: run k's row a + j). A column sum never mixes two runs. The columns left
+        of a run's shift keep an earlier run's differences (each at most ``max_value``, like the others): they add
+        the same amount to both ends of every window's row sum, and the sums are exact (see :class:`Engine`), so
+        they cancel exactly."""
+        h_px, w_px = self.shape
+        hw, win = self.window_px // 2, self.window_px
+        stack, absdiff = buffers.stack, cv2.absdiff
         row = 0
         for view, a, b in runs[k0:]:
             n_rows = b - a + 2 * hw
@@ -217,15 +265,14 @@ class Engine:
             r0, r1 = max(a - hw, 0), min(b + hw, h_px)
             top, bottom = row + r0 - (a - hw), row + r1 - (a - hw)
             absdiff(left[r0:r1], right[r0:r1], stack[top:bottom, s:w_px])
-            stack[top:bottom, :s].fill(0)  # (the window sums then equal a per-run integral's, see below)
             if top > row:  # rows above the image
                 stack[row:top].fill(0)
             if bottom < row + n_rows:  # ... and below
                 stack[bottom : row + n_rows].fill(0)
             offsets.append(row)
             row += n_rows
-        integ = cv2.integral(stack[:row], self.integral[: row + 1], self.sdepth)
-        cv2.subtract(integ[win:], integ[: row + 1 - win], self.band[: row + 1 - win])
+        integ = cv2.integral(stack[:row], buffers.integral[: row + 1], self.sdepth)
+        cv2.subtract(integ[win:], integ[: row + 1 - win], buffers.band[: row + 1 - win])
 
     def winners(self, v0: int = 0, v1: int | None = None, none_index: float = -1.0) -> tuple[np.ndarray, np.ndarray]:
         """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel
@@ -251,15 +298,18 @@ class Engine:
         """Where the left pixel had any candidate (bool; call after winners)."""
         return self.cost[self.rows_decoded] < NO_MATCH
 
-    def scores(self, index: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """SAD of the winner and of index -+ 1, and the best SAD more than 1 px away (rows as in winners).
+    def scores(
+        self, index: np.ndarray, rows: slice | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """SAD of the winner and of index -+ 1, and the best SAD more than 1 px away (``rows``: those decoded by
+        winners; pass them when several threads decode disjoint rows).
 
         The neighbours' keys are read back from ``costs`` (nearest-neighbour remap of its (D * H, W) view) and are
         valid only where the winner lies strictly inside its row's window (see edge_mask).
         """
         h_px, w_px = self.shape
         n = self.num_disparities
-        sl = self.rows_decoded
+        sl = rows if rows is not None else self.rows_decoded
         key_minus, key_plus, far_tmp, stack_row = self.key_minus[sl], self.key_plus[sl], self.far_tmp[sl], self.rows[sl]
         if self.rolling:
             np.copyto(key_minus, self.minus_run[sl])
@@ -337,6 +387,11 @@ def _row_bands(window: RowWindow, num_disparities: int, merge_gap: int = 40) -> 
     for k, a, b in zip(starts_i[first].tolist(), starts_v[first].tolist(), ends_v[last].tolist(), strict=True):
         bands[k].append((a, b))
     return bands
+
+
+def clip_bands(bands: list[list[tuple[int, int]]], v0: int, v1: int) -> list[list[tuple[int, int]]]:
+    """The bands of :meth:`Engine.plan` cut to rows ``v0:v1`` (every searched row inside stays searched)."""
+    return [[(max(a, v0), min(b, v1)) for a, b in runs if a < v1 and b > v0] for runs in bands]
 
 
 def grids(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:

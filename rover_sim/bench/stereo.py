@@ -17,10 +17,16 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from nav.camera import StereoRig
-from nav.stereo import StereoParams, compute_disparity, stereobm_baseline
+from nav.stereo import (
+    StereoParams,
+    compute_disparity,
+    pipeline_threads,
+    stereobm_baseline,
+)
 from rover_sim.bench import write_json
 from rover_sim.bench.stereo_flight import render_flight_pair
 from rover_sim.errors import ConfigError
@@ -218,7 +224,7 @@ def _bench_profile(profile: str, resolutions_px: tuple[int, ...], repeats: int) 
         pairs = pairs_for_profile(profile, res)
         pairs_256 = pairs_256 or pairs
         rows = _rows(pairs, res, repeats)
-        per_res[res] = _aggregate(rows)
+        per_res[res] = _aggregate(rows) | {"threads": threads_used((res, res))}
         _print_table(rows, per_res[res], f"all @{res}")
         all_rows += rows
     agg = dict(per_res[256])
@@ -231,12 +237,22 @@ def _bench_profile(profile: str, resolutions_px: tuple[int, ...], repeats: int) 
         agg[f"ratio_{res}"] = a["ours_ms"] / a["stereobm_ms"]
     ratios = {res: (agg["ratio"] if res == 256 else agg[f"ratio_{res}"]) for res in per_res}
     for res, ratio in ratios.items():
-        print(f"[{profile}] speed ratio ours/StereoBM @{res} px = {ratio:.2f} (acceptance <= {bar})")
+        threads = per_res[res]["threads"]
+        print(
+            f"[{profile}] speed ratio ours/StereoBM @{res} px = {ratio:.2f} (acceptance <= {bar}; threads: ours "
+            f"{threads['ours']}, StereoBM {threads['stereobm']})"
+        )
     better = beats_stereobm(agg)
     print(f"[{profile}] denser and fewer bad-1px than StereoBM (256 px): {'yes' if better else 'NO'}")
     agg["profile"] = profile
     agg["passed"] = bool(all(r <= bar for r in ratios.values()) and better)
     return agg, all_rows, pairs_256
+
+
+def threads_used(shape: tuple[int, int]) -> dict[str, int]:
+    """Threads each side may run on for images of ``shape``: ours from :func:`nav.stereo.pipeline_threads`,
+    StereoBM's from OpenCV's thread pool (``cv2.getNumThreads()``: StereoBM splits its rows among them)."""
+    return {"ours": pipeline_threads(shape), "stereobm": cv2.getNumThreads()}
 
 
 def _time_ms(fn, repeats: int = 15) -> float:

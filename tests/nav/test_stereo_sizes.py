@@ -197,3 +197,52 @@ def test_wide_rows_keep_the_disparity_tag_exact() -> None:
         k = keys[i][keys[i] < NO_MATCH]
         assert k.size > 0.5 * h_px * w_px
         np.testing.assert_array_equal((k - np.floor(k)) * 256, i)
+
+
+def ground_like_pair(h_px: int, w_px: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Textured pair whose disparity grows down the rows (4 to 40 px, like the ground), with a featureless band."""
+    rng = np.random.default_rng(seed)
+    tex = cv2.GaussianBlur(rng.uniform(0, 255, (h_px, w_px + 64)).astype(np.float32), (0, 0), 1.2)
+    tex = cv2.normalize(tex, None, 20, 235, cv2.NORM_MINMAX)
+    tex[h_px // 6 : h_px // 4] = 128.0  # no texture: these rows are not searched
+    xs = np.tile(np.arange(w_px, dtype=np.float32) + 32, (h_px, 1))
+    ys = np.tile(np.arange(h_px, dtype=np.float32)[:, None], (1, w_px))
+    shift = np.linspace(4.0, 40.0, h_px, dtype=np.float32)[:, None]
+    left = cv2.remap(tex, xs, ys, cv2.INTER_CUBIC)
+    right = cv2.remap(tex, xs + shift, ys, cv2.INTER_CUBIC)
+    return np.clip(np.rint(left), 0, 255).astype(np.uint8), np.clip(np.rint(right), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("shape", [(256, 256), (600, 560)])
+def test_threads_do_not_change_the_disparity(
+    engine_mode: str, shape: tuple[int, int], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The worker thread (from 512x512 px up: band-pass, texture and half of the search's rows) gives the same bits
+    as the calling thread alone, on every call; the row split really runs where it should."""
+    left, right = ground_like_pair(*shape)
+    params = StereoParams(num_disparities=48, window_px=7)
+    parts: list[int] = []
+    search_rows = pipeline_mod._Pipeline.search_rows
+
+    def spy(self, bands, v0, v1, part, *args):  # noqa: ANN001, ANN002, ANN202
+        parts.append(part)
+        return search_rows(self, bands, v0, v1, part, *args)
+
+    monkeypatch.setattr(pipeline_mod._Pipeline, "search_rows", spy)
+    n_threads = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(1)
+        assert pipeline_mod.pipeline_threads(shape) == 1
+        alone = compute_disparity(left, right, params)
+        assert parts == [0]
+        cv2.setNumThreads(2)
+        threaded = pipeline_mod.pipeline_threads(shape) == 2
+        assert threaded == (shape[0] * shape[1] >= 512 * 512)
+        for _ in range(3):
+            parts.clear()
+            np.testing.assert_array_equal(compute_disparity(left, right, params), alone)
+            split = threaded and engine_mode == "volume"
+            assert sorted(parts) == ([0, 1] if split else [0])
+    finally:
+        cv2.setNumThreads(n_threads)
+    assert np.isfinite(alone).mean() > 0.5
