@@ -390,6 +390,11 @@ class Scenario(_Spec):
                 "terrain.drift_ripples need physics.soil_model = 'wong_reece' (the default 'bekker' law has no drift "
                 f"soil); got {self.physics.soil_model!r}"
             )
+        if self.physics.deformable and self.terrain.streamed is not None:
+            raise ValueError(
+                "physics.deformable = true is not supported on a streamed terrain (terrain.streamed) yet: ruts would "
+                "have to follow the moving window; turn one of them off"
+            )
         p = self.passing
         if (p.min_final_sinkage_m is not None or p.max_final_sinkage_m is not None) and not self.physics.deformable:
             raise ValueError(

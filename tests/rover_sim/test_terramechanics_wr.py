@@ -44,6 +44,8 @@ def test_scenario_physics_fields_select_the_law():
         load_scenario("wopmay", ["physics.soil_model=scm"])
     with pytest.raises(ConfigError, match="physics.deformable = true needs physics.soil_model = 'wong_reece'"):
         load_scenario("wopmay", ["physics.deformable=true"])
+    with pytest.raises(ConfigError, match=r"spirit_plains_sol.toml.*not supported on a streamed terrain"):
+        load_scenario("spirit_plains_sol", ["physics.soil_model=wong_reece", "physics.deformable=true"])
 
 
 def _steady(law: WheelSoilLaw, slip: float, material: int = 0, v_rim: float = 0.05, seconds: float = 40.0):
