@@ -38,6 +38,25 @@ def py_min(a: float, b: float) -> float:
 
 
 @njit(cache=True)
+def contact_frame(
+    sd: np.ndarray, w: int, nw: int, nx: float, ny: float, nz: float
+) -> tuple[float, float, float, float, float, float, float, float]:
+    """Wheel ``w``'s contact tangent frame from the sensor block ``sd`` and the unit ground normal ``n``: the
+    heading projected on the contact plane (``l``), lateral ``t = n x l``, and the hub velocity along each
+    (``v_x``, ``v_y``). Shared by both laws' kernels (this module and ``wr_kernel.py``)."""
+    k = 7 * nw + 3 * w  # hub velocity block; headings follow 3 * nw later
+    h = k + 3 * nw
+    hx, hy, hz = sd[h], sd[h + 1], sd[h + 2]
+    hn = hx * nx + hy * ny + hz * nz
+    lx, ly, lz = hx - hn * nx, hy - hn * ny, hz - hn * nz
+    ln = math.sqrt(lx * lx + ly * ly + lz * lz)
+    lx, ly, lz = lx / ln, ly / ln, lz / ln
+    tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
+    vx_w, vy_w, vz_w = sd[k], sd[k + 1], sd[k + 2]
+    return lx, ly, lz, tx, ty, tz, vx_w * lx + vy_w * ly + vz_w * lz, vx_w * tx + vy_w * ty + vz_w * tz
+
+
+@njit(cache=True)
 def bekker_wheels(
     sd: np.ndarray,
     materials: np.ndarray,
@@ -81,18 +100,7 @@ def bekker_wheels(
             forces[w, 2] = 0.0
             continue
         nx, ny, nz = nx / W, ny / W, nz / W
-        # contact tangent frame: heading projected on the contact plane, lateral = n x long
-        k = 7 * nw + 3 * w  # hub velocity block; headings follow 3 * nw later
-        h = k + 3 * nw
-        hx, hy, hz = sd[h], sd[h + 1], sd[h + 2]
-        hn = hx * nx + hy * ny + hz * nz
-        lx, ly, lz = hx - hn * nx, hy - hn * ny, hz - hn * nz
-        ln = math.sqrt(lx * lx + ly * ly + lz * lz)
-        lx, ly, lz = lx / ln, ly / ln, lz / ln
-        tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
-        vx_w, vy_w, vz_w = sd[k], sd[k + 1], sd[k + 2]
-        v_x = vx_w * lx + vy_w * ly + vz_w * lz
-        v_y = vx_w * tx + vy_w * ty + vz_w * tz
+        lx, ly, lz, tx, ty, tz, v_x, v_y = contact_frame(sd, w, nw, nx, ny, nz)
         m = materials[w]
         sink_coef, expo, tan_phi, cb, K = consts[m, 0], consts[m, 1], consts[m, 2], consts[m, 3], consts[m, 4]
         ss, tread, n, rc_coef = consts[m, 5], consts[m, 6], consts[m, 7], consts[m, 8]

@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-from rover_sim.sim.soil_kernel import py_max, py_min
+from rover_sim.sim.soil_kernel import contact_frame, py_max, py_min
 from rover_sim.sim.soil_tables import N_LOAD, N_SLIP
 
 BOW_M = 0.002  # advance over which the front-loaded (resisting) stress distribution forms
@@ -182,17 +182,7 @@ def wr_wheels(
             out[2, w] = math.nan
             continue
         nx, ny, nz = nx / W, ny / W, nz / W
-        k = 7 * nw + 3 * w
-        h = k + 3 * nw
-        hx, hy, hz = sd[h], sd[h + 1], sd[h + 2]
-        hn = hx * nx + hy * ny + hz * nz
-        lx, ly, lz = hx - hn * nx, hy - hn * ny, hz - hn * nz
-        ln = math.sqrt(lx * lx + ly * ly + lz * lz)
-        lx, ly, lz = lx / ln, ly / ln, lz / ln
-        tx, ty, tz = ny * lz - nz * ly, nz * lx - nx * lz, nx * ly - ny * lx
-        vx_w, vy_w, vz_w = sd[k], sd[k + 1], sd[k + 2]
-        v_x = vx_w * lx + vy_w * ly + vz_w * lz
-        v_y = vx_w * tx + vy_w * ty + vz_w * tz
+        lx, ly, lz, tx, ty, tz, v_x, v_y = contact_frame(sd, w, nw, nx, ny, nz)
         v_rim = sd[13 * nw + w] * r
         mat = materials[w]
         rows = tables[mat]
