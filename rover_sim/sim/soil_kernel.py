@@ -57,6 +57,16 @@ def contact_frame(
 
 
 @njit(cache=True)
+def shear_decay_gain(rate_per_s: float, dt_s: float) -> tuple[float, float]:
+    """Exact one-step integration of ``dj/dt = v_slip - rate * j`` over ``dt_s``: ``j' = j * decay + v_slip *
+    gain`` (``gain`` tends to ``dt_s`` as the rate vanishes). Shared by both laws' shear states."""
+    if rate_per_s * dt_s > 1e-9:
+        decay = math.exp(-rate_per_s * dt_s)
+        return decay, (1.0 - decay) / rate_per_s
+    return 1.0, dt_s
+
+
+@njit(cache=True)
 def bekker_wheels(
     sd: np.ndarray,
     materials: np.ndarray,
@@ -112,12 +122,7 @@ def bekker_wheels(
         patch_m[w] = L
         f_max = cb * L + W * tan_phi
         # step 4: shear displacement, exact integration of dj/dt = v_slip - (V/L) j with V = |r omega|
-        a = abs(v_rim) / L
-        if a * dt_s > 1e-9:
-            decay = math.exp(-a * dt_s)
-            gain = (1.0 - decay) / a
-        else:
-            decay, gain = 1.0, dt_s
+        decay, gain = shear_decay_gain(abs(v_rim) / L, dt_s)
         jx0, jy0 = jx_m[w], jy_m[w]
         jx = jx0 * decay + (v_rim - v_x) * gain
         jy = jy0 * decay - v_y * gain

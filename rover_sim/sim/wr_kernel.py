@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-from rover_sim.sim.soil_kernel import contact_frame, py_max, py_min
+from rover_sim.sim.soil_kernel import contact_frame, py_max, py_min, shear_decay_gain
 from rover_sim.sim.soil_tables import N_LOAD, N_SLIP
 
 BOW_M = 0.002  # advance over which the front-loaded (resisting) stress distribution forms
@@ -194,12 +194,7 @@ def wr_wheels(
         vf[w, 2] += alpha * (v_y - vf[w, 2])
         V = py_max(py_max(abs(vf[w, 0]), abs(vf[w, 1])), abs(vf[w, 2]))
         L = patch_m[w]
-        a = V / L
-        if a * dt_s > 1e-9:
-            decay = math.exp(-a * dt_s)
-            gain = (1.0 - decay) / a
-        else:
-            decay, gain = 1.0, dt_s
+        decay, gain = shear_decay_gain(V / L, dt_s)
         jx0, jy0 = jx_m[w], jy_m[w]
         jx = py_min(py_max(jx0 * decay + (v_rim - v_x) * gain, -L), L)
         jy = py_min(py_max(jy0 * decay - v_y * gain, -L), L)

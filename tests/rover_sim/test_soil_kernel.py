@@ -13,14 +13,17 @@ from rover_sim.sim.terramechanics import WheelSoilLaw
 N = 6
 
 
-def _random_block(rng: np.random.Generator) -> np.ndarray:
-    """One sensor block (models/mer/rover.xml layout) with some wheels off the ground, some held."""
+def random_sensor_block(
+    rng: np.random.Generator, max_load_n: float = 300.0, contact_span_m: float = 3.0
+) -> np.ndarray:
+    """One sensor block (models/mer/rover.xml layout): some wheels off the ground, some held, some reversing
+    (shared with test_wr_kernel.py)."""
     contact = np.zeros((N, 7))
-    load = rng.uniform(0.0, 300.0, N) * (rng.random(N) > 0.2)
+    load = rng.uniform(0.0, max_load_n, N) * (rng.random(N) > 0.2)
     normal = rng.normal(size=(N, 3)) * 0.2 + [0.0, 0.0, -1.0]
     contact[:, 1:4] = normal / np.linalg.norm(normal, axis=1, keepdims=True) * load[:, None]
     contact[:, 0] = load > 0
-    contact[:, 4:7] = rng.uniform(-3.0, 3.0, (N, 3))
+    contact[:, 4:7] = rng.uniform(-contact_span_m, contact_span_m, (N, 3))
     vel = rng.normal(scale=0.05, size=(N, 3))
     heading = rng.normal(size=(N, 3)) + [1.0, 0.0, 0.0]
     heading /= np.linalg.norm(heading, axis=1, keepdims=True)
@@ -41,7 +44,7 @@ def _run(fn, law: WheelSoilLaw, blocks: list[np.ndarray], mats: list[np.ndarray]
 def test_compiled_law_is_bit_identical_to_its_python_body() -> None:
     rng = np.random.default_rng(7)
     law = WheelSoilLaw()
-    blocks = [_random_block(rng) for _ in range(300)]
+    blocks = [random_sensor_block(rng) for _ in range(300)]
     mats = [rng.integers(0, 3, N).astype(np.int64) for _ in range(300)]
     compiled = _run(bekker_wheels, law, blocks, mats)
     python = _run(bekker_wheels.py_func, law, blocks, mats)
@@ -55,7 +58,7 @@ def test_material_lookup_and_wrenches_match_their_python_bodies() -> None:
     material_grid = rng.integers(0, 3, heights.shape).astype(np.int64)
     grid = np.array([0.3, -0.2, 1.5, 1.0, 20.0])  # origin, half extents, 1 / cell
     for _ in range(50):
-        sd = _random_block(rng)
+        sd = random_sensor_block(rng)
         sd[6:42:7] = rng.uniform(-0.1, 0.3, N)  # contact heights: some on rocks (above the margin)
         got, want = np.zeros(N, np.int64), np.zeros(N, np.int64)
         materials_under(sd, heights, material_grid, grid, 0.03, 3, got)
@@ -75,7 +78,7 @@ def test_list_api_equals_array_api(material: int) -> None:
     rng = np.random.default_rng(material)
     a, b = WheelSoilLaw(), WheelSoilLaw()
     for _ in range(20):
-        sd = _random_block(rng)
+        sd = random_sensor_block(rng)
         f_list = a.evaluate(sd.tolist(), [material] * N, 0.005)
         f_arr = np.zeros((N, 3))
         b.evaluate_into(sd, np.full(N, material, dtype=np.int64), 0.005, f_arr)

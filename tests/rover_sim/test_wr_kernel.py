@@ -20,6 +20,7 @@ from rover_sim.sim.wr_kernel import (
     wr_wrenches,
 )
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
+from tests.rover_sim.test_soil_kernel import random_sensor_block
 
 N = 6
 
@@ -29,18 +30,7 @@ def _bits(a: np.ndarray) -> np.ndarray:
 
 
 def _random_block(rng: np.random.Generator) -> np.ndarray:
-    """One sensor block (models/mer/rover.xml layout): some wheels off the ground, some held, some reversing."""
-    contact = np.zeros((N, 7))
-    load = rng.uniform(0.0, 400.0, N) * (rng.random(N) > 0.2)
-    normal = rng.normal(size=(N, 3)) * 0.2 + [0.0, 0.0, -1.0]
-    contact[:, 1:4] = normal / np.linalg.norm(normal, axis=1, keepdims=True) * load[:, None]
-    contact[:, 0] = load > 0
-    contact[:, 4:7] = rng.uniform(-1.5, 1.5, (N, 3))
-    vel = rng.normal(scale=0.05, size=(N, 3))
-    heading = rng.normal(size=(N, 3)) + [1.0, 0.0, 0.0]
-    heading /= np.linalg.norm(heading, axis=1, keepdims=True)
-    rate = rng.normal(scale=0.4, size=N) * (rng.random(N) > 0.15)  # some wheels held (rate 0)
-    return np.concatenate([contact.ravel(), vel.ravel(), heading.ravel(), rate])
+    return random_sensor_block(rng, max_load_n=400.0, contact_span_m=1.5)
 
 
 def test_py_hypot_is_cpythons_math_hypot() -> None:
