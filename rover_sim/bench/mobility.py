@@ -119,12 +119,18 @@ def parked_drift_m(slope_deg: float = 30.0, hold_s: float = 60.0, seed: int = 0,
     return float(np.linalg.norm(sim.position_m() - p0))
 
 
-SPEED_MODES = ("law", "deform", "bare")
+SPEED_MODES = ("law", "deform", "bare", "bare_sphere")
 
 
 def physics_speed(sim_s: float = 20.0, seed: int = 0, round_s: float = 1.0) -> dict[str, float]:
     """Real-time factors driving on flat sand at the scenarios' cells: the law alone, the law with the deformable
     terrain, and bare MuJoCo (law off) of the same model and timestep, all in the same run.
+
+    ``bare`` is ``mj_step`` alone on this law's model (wheel cylinders on their ground plates, see
+    :mod:`rover_sim.sim.ground_plates`), the plates left where the settled rover put them (flat ground), so it
+    costs none of our code; ``bare_sphere`` is ``mj_step`` alone on the default law's model, where MuJoCo tests
+    each wheel sphere against the heightfield itself (a reference: what "bare MuJoCo" of a rover on a
+    heightfield costs).
 
     "On one core" (issue #13): each mode's time is the CPU time of this thread (``time.thread_time``), so other
     jobs on a shared machine do not count as our cost; the modes run interleaved, ``round_s`` of simulated time
@@ -133,8 +139,13 @@ def physics_speed(sim_s: float = 20.0, seed: int = 0, round_s: float = 1.0) -> d
     terrain = slope_terrain("sand", 0.0, seed)
     sims = {}
     for mode in SPEED_MODES:
-        sim = sims[mode] = wr_sim(terrain, deform=mode == "deform", soil_law=mode != "bare")
+        if mode == "bare_sphere":
+            sim = sims[mode] = RoverSim(terrain, soil_law=False)
+        else:
+            sim = sims[mode] = wr_sim(terrain, deform=mode == "deform", soil_law=not mode.startswith("bare"))
         sim.place(START_X_M, 0.0, 0.0, settle_s=0.5)
+        if mode == "bare":
+            sim.plates = None  # mj_step alone: the plates stay where they are (flat ground)
     dt = sims["bare"].timestep_s
     chunk = int(round(TICK_S / dt))
     per_round = max(int(round(round_s / (chunk * dt))), 1)  # ticks of each mode per round
@@ -384,6 +395,8 @@ def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "run
         ("the same by wall clock (shared machine: load-dependent)", f"{rates['deform_wall']:.0f}x", "-", True),
         ("ratio to bare MuJoCo step rate (same run)", f"{rtf_def / rtf_bare:.2f}", ">= 0.5", rtf_def / rtf_bare >= 0.5),
         ("real-time factor, law only / bare MuJoCo", f"{rtf:.0f}x / {rtf_bare:.0f}x", "-", True),
+        ("bare MuJoCo with its own sphere-heightfield wheel contact (the default law's model)",
+         f"{rates['bare_sphere']:.0f}x", "-", True),  # fmt: skip
     ]
     print("| check | measured | acceptance | ok |")
     print("|---|---:|---|:-:|")
@@ -412,6 +425,7 @@ def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "run
         "deformation_realtime_factor": rtf_def,
         "deformation_bare_ratio": rtf_def / rtf_bare,
         "speed_wall_clock": {mode: rates[f"{mode}_wall"] for mode in SPEED_MODES},
+        "bare_sphere_realtime_factor": rates["bare_sphere"],
         "ruts": ruts,
         "checks": [{"name": n, "measured": v, "acceptance": a, "ok": bool(ok)} for n, v, a, ok in checks],
         "all_pass": all(c[3] for c in checks) and all(passes(r) for r in rows),

@@ -6,15 +6,15 @@ that sinkage becomes geometry, as in Chrono's SCM but on MuJoCo's heightfield gr
 * **ruts**: every deformable cell under a wheel's contact patch (a ``width x (contact length + one cell)``
   rectangle along the wheel's heading) is lowered to ``h0 - z`` (``h0`` the undisturbed height), never raised by a
   wheel; physics sees it at once (``model.hfield_data``), so the rover rides in its ruts;
-* **rut shoulders**: the collision wheel is a sphere of the wheel's radius ``r``, wider than the 16 cm tread: the
-  cells beside the tread out to ``r`` are lowered to the sphere's underside at the rut depth
-  (``h0 - z + r - sqrt(r^2 - d^2)`` at ``d`` from the wheel's mid-plane), so the wheel sits in its rut at the law's
-  sinkage instead of hanging on the rut's edges;
-* **berms**: the soil a wheel pushes down is put back beside the rut (the cells from the wider of half a width and
-  ``r`` out to ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally; never under the collision sphere, where a
-  berm raised in one write would push into it; wider beside a deeper rut, so a wheel digging in spreads the soil
-  outward: its berm's crest, next to the rut, stays below the rut's depth): volume is conserved to the grid's
-  resolution;
+* **rut walls**: the rut's floor is the tread's width (the collision wheel is the true 0.16 m cylinder on its
+  ground plate, :mod:`rover_sim.sim.ground_plates`, which feels the ground under the tread only: the same cells a
+  rut floor is written into, so the wheel sits in its rut at the law's sinkage); beside it the walls rise at the
+  soil's angle of repose (``REPOSE_DEG``, loose sand 30-35 deg) to the undisturbed surface, as loose soil
+  slumps into a rut's sides;
+* **berms**: the soil a wheel pushes down is put back beside the rut (the cells from the walls' top out to
+  ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally; wider beside a deeper rut, so a wheel digging in
+  spreads the soil outward: its berm's crest, next to the rut, stays below the rut's depth): volume is conserved
+  to the grid's resolution;
 * **multipass / compaction**: a rut is plastic: a later wheel deepens it only where its own sinkage is larger
   (SCM's loading-only-beyond-the-previous-maximum); the law is told the rut depth ahead of each wheel
   (``law.presink_m``), so only the new compaction resists (a second pass sinks less and rolls easier);
@@ -33,6 +33,7 @@ cells changed since the last render (:meth:`DeformableTerrain.pop_dirty_cells`) 
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,7 +46,7 @@ from rover_sim.sim.wr_kernel import (  # noqa: F401 - the rut's shape constants,
     P_BASE,
     P_CELL,
     P_SCALE,
-    P_SPHERE_R,
+    P_WALL_TAN,
     P_WIDTH,
     P_X0,
     P_Y0,
@@ -57,6 +58,7 @@ if TYPE_CHECKING:
     from rover_sim.sim.physics import RoverSim
 
 SINK_FILTER_S = 0.5
+REPOSE_DEG = 33.0  # slope of a rut's walls: loose sand's angle of repose, 30-35 deg (Mars: Atwood-Genco et al. 2015)
 _RENDER, _LOG = 0, 1  # rows of the dirty-cell boxes: one per consumer
 
 
@@ -87,7 +89,7 @@ class DeformableTerrain:
         params[P_SCALE] = float(m.hfield_size[hid][2])  # elevation range
         params[P_ALPHA] = sim.timestep_s / (SINK_FILTER_S + sim.timestep_s)
         params[P_WIDTH] = sim.law.width_m
-        params[P_SPHERE_R] = sim.law.radius_m  # the collision wheel: a sphere of the wheel's radius (rover.xml)
+        params[P_WALL_TAN] = math.tan(math.radians(REPOSE_DEG))
         self._params = params
         self.enabled = True
         # (valid, i0, i1, j0, j1) cells changed since pop_dirty_cells (row _RENDER) / pop_dirty_cells_for_log (_LOG)

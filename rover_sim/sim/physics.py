@@ -11,6 +11,7 @@ import numpy as np
 
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
+from rover_sim.sim.ground_plates import GroundPlates, add_ground_plates
 from rover_sim.sim.soil_kernel import apply_wheel_wrenches, materials_under
 from rover_sim.sim.stream import release_freed_memory
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
@@ -94,6 +95,7 @@ class RoverSim:
         self.sun = sun or Sun()
         self.streamer, self._texture_fn, self._timestep_override = streamer, texture_fn, timestep_s
         self.terrain_version = 0  # counts window changes (the render model rebuilds when it changes)
+        self.soil_model = soil_model
         self._spec = self._build_spec(texture_rgb, paint=False)
         self._spec_version = 0 if streamer is None else -1  # a streamed window is painted when first rendered
         self.model = self._spec.compile()
@@ -101,7 +103,8 @@ class RoverSim:
             streamer.apply(self.model, terrain)  # the window's true heights (compiling rescales hfield data)
         self.data = mujoco.MjData(self.model)
         self.soil_law_enabled = soil_law
-        self.soil_model = soil_model
+        # the Wong-Reece law computes its own wheel-ground contact: cylinders on ground plates (sim/ground_plates.py)
+        self.plates = GroundPlates(self.model, self.data, WHEEL_RADIUS_M, WHEEL_WIDTH_M) if self._has_plates else None
         self.deform: DeformableTerrain | None = None  # attached by enable_deformation() (wong_reece only)
         if soil_model == "wong_reece":
             from rover_sim.sim import terramechanics_wr
@@ -165,7 +168,13 @@ class RoverSim:
                           elevation_range_m=None if st is None else st.elevation_range_m)  # fmt: skip
         if self._timestep_override is not None:
             spec.option.timestep = self._timestep_override
+        if self._has_plates:
+            add_ground_plates(spec, WHEEL_RADIUS_M, WHEEL_WIDTH_M)
         return spec
+
+    @property
+    def _has_plates(self) -> bool:
+        return self.soil_model == "wong_reece"
 
     @property
     def spec(self) -> mujoco.MjSpec:
@@ -209,6 +218,8 @@ class RoverSim:
         self.terrain = window
         self.terrain_version += 1
         self._set_terrain_lookups()
+        if self.plates is not None:
+            self.plates.set_terrain()
         release_freed_memory()  # the previous window's arrays (see sim/stream.py)
 
     def enable_deformation(self) -> DeformableTerrain:
@@ -237,6 +248,13 @@ class RoverSim:
         self.law.reset()
         self.wheel_ref_rad[:] = 0.0
         self._slide_track: list[tuple[float, np.ndarray]] = []  # (t, position) samples of safety_issue
+        self._forward()
+
+    def _forward(self) -> None:
+        """``mj_forward``, with the ground plates (if any) placed under the wheels where they now are."""
+        if self.plates is not None:
+            mujoco.mj_kinematics(self.model, self.data)
+            self.plates.place()
         mujoco.mj_forward(self.model, self.data)
 
     def place(self, x_m: float, y_m: float, yaw_rad: float, settle_s: float = 1.5) -> None:
@@ -254,7 +272,7 @@ class RoverSim:
         self.data.qpos[0:3] = [x_m, y_m, z]
         self.data.qpos[3:7] = q
         self.data.qvel[:] = 0.0
-        mujoco.mj_forward(self.model, self.data)
+        self._forward()
         self.hold()
         if settle_s > 0:
             self.step_for(settle_s)
@@ -288,12 +306,15 @@ class RoverSim:
         increment = (
             None if wheel_rate_rad_s is None else np.asarray(wheel_rate_rad_s, dtype=float) * dt * self._wheel_free
         )
+        plates = self.plates
         for _ in range(n_steps):
             if increment is not None:
                 self.wheel_ref_rad += increment
                 ctrl_wheels[:] = self.wheel_ref_rad
             if self.soil_law_enabled:
                 self._apply_soil_law(dt)
+            if plates is not None:
+                plates.place()
             mujoco.mj_step(m, d)
             if self._substep_hook is not None:
                 self._substep_count += 1

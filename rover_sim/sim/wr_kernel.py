@@ -29,14 +29,14 @@ BRISTLE_DAMPING_RATIO = 0.7  # damping ratio of the shear spring (initial stiffn
 
 UPDATE_M = 0.02  # contact travel between rut writes (half a 4 cm cell)
 BERM_CELLS = 2
-BERM_SPREAD = 3.0  # a berm is at least this many rut depths wide (about a third of the rut's depth tall)
+BERM_SPREAD = 5.0  # a berm is at least this many rut depths wide
 
 # rows of the law's per-wheel output block (WheelSoilLaw.out_state)
 OUT_LOAD, OUT_SINKAGE, OUT_SLIP, OUT_LONG, OUT_LAT, OUT_CONTACT, OUT_TORQUE = range(7)
 # columns of the per-material constants (WheelSoilLaw.consts)
 C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1 = range(7)
 # entries of the deformable terrain's float parameters (DeformableTerrain)
-P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_SPHERE_R = range(8)
+P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_WALL_TAN = range(8)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for a double
 
 
@@ -284,10 +284,10 @@ def write_rut(h: np.ndarray, h0: np.ndarray, soft: np.ndarray, hfield: np.ndarra
     and ``hfield`` (MuJoCo's ``hfield_data`` from ``adr``), its displaced soil into the berms beside it; grows the
     ``dirty`` boxes over the changed cells. See :mod:`rover_sim.sim.deform` for the shape."""
     nrow, ncol = h.shape
-    cell, base, scale, width, r = p[P_CELL], p[P_BASE], p[P_SCALE], p[P_WIDTH], p[P_SPHERE_R]
+    cell, base, scale, width, wall_tan = p[P_CELL], p[P_BASE], p[P_SCALE], p[P_WIDTH], p[P_WALL_TAN]
     # behind: the patch; ahead: the patch plus the travel until the next write and a cell
     back, front, half_w = 0.5 * lp + 0.5 * cell, 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
-    shoulder = py_max(half_w, r)
+    shoulder = half_w + z / wall_tan  # the rut's walls stand at the soil's angle of repose
     reach = shoulder + py_max(BERM_CELLS * cell, BERM_SPREAD * z)
     span = int(math.ceil(py_max(front, reach) / cell)) + 1
     ci, cj = _cell_of(px, py, p, nrow, ncol)
@@ -304,9 +304,9 @@ def write_rut(h: np.ndarray, h0: np.ndarray, soft: np.ndarray, hfield: np.ndarra
             if along > front or along < -back:
                 continue
             if across < shoulder:
-                target = h0[i, j] - z  # the tread; beside it, the sphere's underside
+                target = h0[i, j] - z  # the tread; beside it, the wall
                 if across > half_w:
-                    target += r - math.sqrt(r * r - across * across)
+                    target += (across - half_w) * wall_tan
                 if target < h[i, j]:
                     displaced += h[i, j] - target
                     h[i, j] = target
