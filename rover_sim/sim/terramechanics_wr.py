@@ -206,12 +206,10 @@ class WheelSoilLaw:
                     m.n0,
                     m.n1,
                     m.initial_shear_modulus_m,
-                    m.fast_shear_fraction,
-                    m.slow_shear_ratio,
                 )
             )
         self._tables = np.ascontiguousarray(tables)  # (materials, N_SLIP * N_LOAD, 7)
-        self._consts = np.array(consts, dtype=float)  # (materials, 10): wr_kernel.C_* columns
+        self._consts = np.array(consts, dtype=float)  # (materials, 8): wr_kernel.C_* columns
         self.reset()
 
     def reset(self) -> None:

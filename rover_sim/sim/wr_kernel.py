@@ -33,9 +33,9 @@ BERM_SPREAD = 3.0  # a berm is at least this many rut depths wide (about a third
 
 # rows of the law's per-wheel output block (WheelSoilLaw.out_state)
 OUT_LOAD, OUT_SINKAGE, OUT_SLIP, OUT_LONG, OUT_LAT, OUT_CONTACT, OUT_TORQUE = range(7)
-# columns of the per-material constants (WheelSoilLaw.consts): C_K, C_KY the short shear scales, C_K0 the initial
-# one (soil_tables.SoilParams.initial_shear_modulus_m), C_W the fast fraction, C_SLOW the ratio of the scales
-C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0, C_W, C_SLOW = range(10)
+# columns of the per-material constants (WheelSoilLaw.consts): C_K the longitudinal curve's short scale, C_K0 its
+# initial one (soil_tables.SoilParams.initial_shear_modulus_m, for the shear spring's damping), C_KY the lateral K_y
+C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0 = range(8)
 # entries of the deformable terrain's float parameters (DeformableTerrain)
 P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_SPHERE_R = range(8)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for a double
@@ -123,23 +123,6 @@ def table_lookup(rows: np.ndarray, inv_du: float, load_n: float, slip: float) ->
 
 
 @njit(cache=True)
-def _patch_mean(q: float) -> float:
-    """Mean of ``1 - exp(-x)`` over ``x`` in ``[0, q]``: ``1 - (1 - exp(-q)) / q`` (``q / 2`` below ``q = 1e-6``)."""
-    return 1.0 - (1.0 - math.exp(-q)) / q if q > 1e-6 else 0.5 * q
-
-
-@njit(cache=True)
-def patch_mobilisation(q: float, w_fast: float, slow: float) -> float:
-    """The shear curve of :func:`rover_sim.sim.soil_tables.mobilisation` averaged over a patch whose displacement
-    grows linearly from 0 to ``q K``, in closed form: ``w m(q) + (1 - w) m(q / slow)`` with
-    ``m(q) = 1 - (1 - exp(-q)) / q``; ``w = 1`` is the Janosi-Hanamoto mean ``m(q)``."""
-    mob = _patch_mean(q)
-    if w_fast < 1.0:
-        mob = w_fast * mob + (1.0 - w_fast) * _patch_mean(q / slow)
-    return mob
-
-
-@njit(cache=True)
 def _lift_off(sd: np.ndarray, w: int, nw: int, vf: np.ndarray, jx_m: np.ndarray, jy_m: np.ndarray,
               patch_m: np.ndarray, dt_s: float, alpha: float, radius_m: float) -> None:  # fmt: skip
     """Shear states of wheel ``w`` while it is out of contact: renewed by its advance, no source."""
@@ -205,8 +188,7 @@ def wr_wheels(
         mat = materials[w]
         rows = tables[mat]
         inv_du, tan_phi, coh = consts[mat, C_INV_DU], consts[mat, C_TAN_PHI], consts[mat, C_COHESION]
-        K, Ky, n0, n1 = consts[mat, C_K], consts[mat, C_KY], consts[mat, C_N0], consts[mat, C_N1]
-        k0, w_fast, slow = consts[mat, C_K0], consts[mat, C_W], consts[mat, C_SLOW]
+        k0, Ky, n0, n1 = consts[mat, C_K0], consts[mat, C_KY], consts[mat, C_N0], consts[mat, C_N1]
         # step 1: shear states, renewed by the net advance over the soil
         vf[w, 0] += alpha * (v_rim - vf[w, 0])
         vf[w, 1] += alpha * (v_x - vf[w, 1])
@@ -234,7 +216,7 @@ def wr_wheels(
         # step 4: lateral shear with its own modulus, mean mobilisation over the patch, plus side-wall bulldozing
         f_max = coh * A + W * tan_phi
         q = abs(jy) / Ky
-        mob = patch_mobilisation(q, w_fast, slow)
+        mob = 1.0 - (1.0 - math.exp(-q)) / q if q > 1e-6 else 0.5 * q
         f_lat = mob * f_max * (1.0 if jy >= 0 else -1.0)
         f_t = math.sqrt(W * W * hn_ * hn_ + f_lat * f_lat)
         if f_t > f_max:  # longitudinal and lateral shear share the strength
@@ -243,7 +225,7 @@ def wr_wheels(
         # step 5: damping of the shear springs (LuGre sigma_1), zero at steady state
         sigma1 = BRISTLE_DAMPING_RATIO * 2.0 * math.sqrt(f_max / (2.0 * k0) * mass_share_kg)
         f_long += sigma1 * (jx - jx0) / dt_s
-        f_lat += sigma1 * (K / Ky) * (jy - jy0) / dt_s
+        f_lat += sigma1 * (k0 / Ky) * (jy - jy0) / dt_s
         f_cap = f_max + W * fbn + W * rn
         f_t = math.sqrt(f_long * f_long + f_lat * f_lat)
         if f_t > f_cap:

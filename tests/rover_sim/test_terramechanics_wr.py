@@ -4,6 +4,7 @@ The default Bekker law is tested in test_terramechanics.py."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +17,6 @@ from rover_sim.sim import terramechanics, terramechanics_wr
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.soil_tables import mobilisation
 from rover_sim.sim.terramechanics_wr import BEDROCK, DRIFT, MIXED, SAND, WheelSoilLaw, pack_inputs
-from rover_sim.sim.wr_kernel import patch_mobilisation
 
 W_N = 108.0  # one sixth of MER's weight on Mars
 DT = 0.005
@@ -165,28 +165,20 @@ def test_two_scale_shear_curve_reduces_to_janosi_hanamoto_and_keeps_rising():
     for soil in (BEDROCK, MIXED, DRIFT):
         assert soil.fast_shear_fraction == 1.0
         k = soil.shear_modulus_m
-        np.testing.assert_array_equal(mobilisation(j, k, soil), 1.0 - np.exp(-j / k))
+        np.testing.assert_array_equal(mobilisation(j, soil), 1.0 - np.exp(-j / k))
         assert soil.initial_shear_modulus_m == k
     w, k1, k2 = SAND.fast_shear_fraction, SAND.shear_modulus_m, SAND.slow_shear_ratio * SAND.shear_modulus_m
     assert 0.0 < w < 1.0 and k2 > k1
-    m = mobilisation(j, k1, SAND)
+    m = mobilisation(j, SAND)
     assert np.all(np.diff(m) > 0) and np.all(np.diff(m, 2) < 1e-12) and m[-1] < 1.0
-    at = mobilisation(np.array([3 * k1, 3 * k2]), k1, SAND)
+    at = mobilisation(np.array([3 * k1, 3 * k2]), SAND)
     assert at[0] < 0.6 and at[1] > 0.9  # short of the strength at 3 K_1 (slow part rising); nearly all at 3 K_2
-    slope = mobilisation(np.array([1e-7]), k1, SAND)[0] / 1e-7
+    slope = mobilisation(np.array([1e-7]), SAND)[0] / 1e-7
     assert slope == pytest.approx(1.0 / SAND.initial_shear_modulus_m, rel=1e-4)
-
-
-@pytest.mark.parametrize("soil", [SAND, BEDROCK])
-def test_lateral_closed_form_is_the_patch_mean_of_the_shear_curve(soil):
-    """The kernel's closed-form lateral mobilisation equals the mean of soil_tables.mobilisation over a patch whose
-    displacement grows linearly from 0 to |j_y|."""
-    ky = soil.lateral_shear_modulus_m
-    for q in (1e-3, 0.3, 1.0, 3.0, 12.0):
-        x = np.linspace(0.0, q * ky, 200001)
-        m = mobilisation(x, ky, soil)
-        mean = (m.sum() - 0.5 * (m[0] + m[-1])) / (x.size - 1)
-        assert patch_mobilisation(q, soil.fast_shear_fraction, soil.slow_shear_ratio) == pytest.approx(mean, rel=1e-6)
+    with pytest.raises(ValueError, match="fast_shear_fraction"):
+        dataclasses.replace(SAND, fast_shear_fraction=0.0)
+    with pytest.raises(ValueError, match="slow_shear_ratio"):
+        dataclasses.replace(SAND, slow_shear_ratio=0.5)
 
 
 def test_bedrock_params_are_stiffer_than_sand():

@@ -9,7 +9,7 @@ two-scale mobilisation ``F(j) = w (1 - exp(-j/K)) + (1 - w)(1 - exp(-j/(m K)))``
 The sinkage is found by bisection on the vertical balance, the integrals by ``scipy.integrate.quad``.
 
 Lateral (Ishigami 2007, slip angle ``beta``): ``j_y = r (1 - s)(theta1 - theta) tan beta``,
-``tau_y = (c + sigma tan phi) F_y(j_y)`` (``F`` with ``K_y`` for ``K``),
+``tau_y = (c + sigma tan phi)(1 - exp(-j_y / K_y))`` (Janosi-Hanamoto sideways, as the law),
 ``F_y = r b int tau_y + int R_b(h(theta)) (r - h cos theta)`` with the Hegedus bulldozing resistance ``R_b`` on
 the side wall at depth ``h(theta) = r (cos theta - cos theta1)``.
 """
@@ -29,10 +29,10 @@ def _sigma(theta, th1, thm, k, n, r):
     return k * max(r * (math.cos(te) - math.cos(th1)), 0.0) ** n
 
 
-def _mobilised(j: float, k_m: float, soil) -> float:
-    """Fraction of the strength mobilised at displacement ``j >= 0``: two Janosi-Hanamoto terms, weights w, 1 - w."""
-    w, m = soil.fast_shear_fraction, soil.slow_shear_ratio
-    return w * (1.0 - math.exp(-j / k_m)) + (1.0 - w) * (1.0 - math.exp(-j / (m * k_m)))
+def _mobilised(j: float, soil) -> float:
+    """Fraction of the strength mobilised along the rim at displacement ``j >= 0``: two Janosi-Hanamoto terms."""
+    w, K, m = soil.fast_shear_fraction, soil.shear_modulus_m, soil.slow_shear_ratio
+    return w * (1.0 - math.exp(-j / K)) + (1.0 - w) * (1.0 - math.exp(-j / (m * K)))
 
 
 def wheel(soil, r: float, b: float, load_n: float, slip: float) -> dict[str, float]:
@@ -40,12 +40,12 @@ def wheel(soil, r: float, b: float, load_n: float, slip: float) -> dict[str, flo
     k = soil.k_c / b + soil.k_phi
     n = soil.n0 + soil.n1 * slip
     tphi = math.tan(math.radians(soil.friction_angle_deg))
-    c, K = soil.cohesion_pa, soil.shear_modulus_m
+    c = soil.cohesion_pa
 
     def tau(theta, th1, thm):
         j = r * ((th1 - theta) - (1.0 - slip) * (math.sin(th1) - math.sin(theta)))
         s = 1.0 if j >= 0 else -1.0
-        return (c + _sigma(theta, th1, thm, k, n, r) * tphi) * _mobilised(abs(j), K, soil) * s
+        return (c + _sigma(theta, th1, thm, k, n, r) * tphi) * _mobilised(abs(j), soil) * s
 
     def integrals(z):
         th1 = math.acos(max(1.0 - z / r, -1.0))
@@ -94,7 +94,7 @@ def lateral_force(soil, r: float, b: float, z: float, slip: float, beta_rad: flo
 
     def tau_y(t):
         jy = r * (1.0 - slip) * (th1 - t) * math.tan(beta_rad)
-        return (c + _sigma(t, th1, thm, k, n, r) * tphi) * _mobilised(abs(jy), Ky, soil)
+        return (c + _sigma(t, th1, thm, k, n, r) * tphi) * (1.0 - math.exp(-abs(jy) / Ky))
 
     def bull(t):
         h = r * (math.cos(t) - math.cos(th1))
