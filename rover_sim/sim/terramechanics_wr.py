@@ -8,7 +8,8 @@ force and the soil's torque on each wheel come from this module, for all six whe
 outcome of the soil law, the load on each wheel and the slope — nothing is scripted.
 
 The steady-state physics is the Wong–Reece integration of :mod:`rover_sim.sim.soil_tables` (Bekker normal stress
-with Ding et al.'s slip-dependent sinkage exponent, Mohr–Coulomb / Janosi–Hanamoto shear, the MER wheel's grousers
+with Ding et al.'s slip-dependent sinkage exponent, Mohr–Coulomb shear mobilised over two deformation scales
+along the rim (``soil_tables.mobilisation``; Janosi–Hanamoto for every material but SAND), the MER wheel's grousers
 and compliant rim, Hegedus bulldozing), tabulated once per material over (load, slip). Per wheel and step:
 
 1. **Longitudinal shear state** ``j_x``: the shear displacement the soil has accumulated at the rear of the patch.
@@ -27,11 +28,12 @@ and compliant rim, Hegedus bulldozing), tabulated once per material over (load, 
    terrain) only the new compaction resists: ``R (1 - (z_p / z)^(n+1))`` (Bekker's compaction work from
    ``z_p`` to ``z``; multipass).
 4. **Lateral**: its own shear state ``j_y`` (steady ``-v_y L / V``, Ishigami et al. 2007) with its own modulus
-   ``K_y``, the mean Janosi–Hanamoto mobilisation over the patch, plus the side-wall bulldozing of the sunk wheel
-   face (Hegedus); lateral slip also deepens the sinkage (the table's sinkage at the lateral slip ``|j_y| / L``
-   when larger than ``|i_m|``: lateral sinkage).
+   ``K_y``, the mean Janosi–Hanamoto mobilisation over the patch (one scale sideways, whatever the rim's curve),
+   plus the side-wall bulldozing of the sunk wheel face (Hegedus); lateral slip also deepens the sinkage (the
+   table's sinkage at the lateral slip ``|j_y| / L`` when larger than ``|i_m|``: lateral sinkage).
 5. **Strength**: the tangential shear is bounded by ``c A + W tan(phi)`` (bulldozing on top); a damping term on the
-   shear states (LuGre ``sigma_1``) keeps the stiff rock springs stable at a 5 ms step; it vanishes at steady state.
+   shear states (LuGre ``sigma_1``, from the curve's initial stiffness ``F_max / 2 K_0``) keeps the stiff rock
+   springs stable at a 5 ms step; it vanishes at steady state.
 
 Output per wheel: the force on the wheel (world frame, at the contact point) and the soil's resisting torque about
 the axle ``T`` (the drive motor supplies it).
