@@ -14,7 +14,13 @@ the contact (Wong & Reece 1967; Wong 2008 ch. 4):
 * shear displacement along the rim ``j(theta) = r_s [a_rim (theta1 - theta) - a_x (sin theta1 - sin theta)]``
   where ``a_rim = rim speed / V`` and ``a_x = hub speed / V`` with ``V`` the larger of the two (so one table covers
   driving ``0 <= i <= 1`` and braking / dragging ``-1 <= i < 0``, ``i = -1`` a locked wheel);
-* shear stress (Mohr–Coulomb with Janosi–Hanamoto mobilisation) ``tau = (c + sigma tan phi)(1 - exp(-|j| / K))``.
+* shear stress along the rim (Mohr–Coulomb strength, mobilised over two deformation scales; :func:`mobilisation`)::
+
+      tau = (c + sigma tan phi) [w (1 - exp(-|j| / K)) + (1 - w)(1 - exp(-|j| / K_2))]
+
+  a fraction ``w`` of the strength is mobilised over the short scale ``K``, the rest over the longer ``K_2``.
+  With ``w = 1`` this is Janosi & Hanamoto (1961), the form of every material but SAND here. The lateral shear of
+  the law (:mod:`rover_sim.sim.terramechanics_wr`, step 4) keeps Janosi-Hanamoto with its own ``K_y``.
 
 MER wheel terms that a plain rigid wheel lacks, each explicit:
 
@@ -22,7 +28,7 @@ MER wheel terms that a plain rigid wheel lacks, each explicit:
   ``r_s = r + h_g`` (longer shear displacement and lever arm);
 * **compliant rim**: MER's flexure-spoked rim flattens under load; modelled as a flat patch of length ``l_f`` behind
   the bottom of the arc at the full sinkage, carrying the Bekker plate pressure ``(k_c / b + k_phi) z^n`` and
-  Janosi–Hanamoto shear whose displacement keeps growing at the slip rate across it. On rock (tiny sinkage) the
+  the rim's shear curve, its displacement growing at the slip rate across it. On rock (tiny sinkage) the
   flat patch carries the whole load, which is what gives the wheel its grip on outcrop;
 * **bulldozing** (Hegedus 1960 as used by Ishigami et al. 2007): the resistance per unit width of soil pushed by a
   wall sunk to ``z``, ``R_b = D1 (c z + D2 gamma z^2 / 2)`` with ``X_c = 45 deg - phi / 2``,
@@ -68,7 +74,7 @@ class SoilParams:
     name: str
     cohesion_pa: float  # c
     friction_angle_deg: float  # phi
-    shear_modulus_m: float  # Janosi-Hanamoto K, longitudinal
+    shear_modulus_m: float  # Janosi-Hanamoto K, longitudinal (the short scale of a two-scale curve)
     lateral_shear_modulus_m: float  # K_y (Ishigami et al. 2007: its own shear deformation modulus)
     k_c: float  # Bekker cohesive modulus
     k_phi: float  # Bekker frictional modulus
@@ -78,6 +84,49 @@ class SoilParams:
     a1: float
     density_kg_m3: float
     deformable: bool = True  # False: bedrock / rock, the terrain never changes
+    # Two-scale longitudinal shear curve (`mobilisation`): the fraction w of the strength mobilised over K, the rest
+    # over K_2 = slow_shear_ratio K. w = 1: Janosi-Hanamoto. The lateral curve is Janosi-Hanamoto with K_y.
+    fast_shear_fraction: float = 1.0
+    slow_shear_ratio: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.fast_shear_fraction <= 1.0:
+            raise ValueError(
+                f"soil {self.name!r}: fast_shear_fraction must be in (0, 1], not {self.fast_shear_fraction}"
+            )
+        if self.slow_shear_ratio < 1.0:
+            raise ValueError(f"soil {self.name!r}: slow_shear_ratio must be >= 1, not {self.slow_shear_ratio}")
+
+    @property
+    def initial_shear_modulus_m(self) -> float:
+        """The deformation scale of the curve's initial slope: ``d(tau / tau_max)/dj = 1 / K_0`` at ``j = 0``."""
+        w = self.fast_shear_fraction
+        if w >= 1.0:
+            return self.shear_modulus_m
+        return self.shear_modulus_m / (w + (1.0 - w) / self.slow_shear_ratio)
+
+
+def mobilisation(j_abs: np.ndarray, soil: SoilParams) -> np.ndarray:
+    """Fraction of the shear strength mobilised along the rim at shear displacement ``|j|``:
+    ``w (1 - exp(-|j| / K)) + (1 - w)(1 - exp(-|j| / K_2))`` with ``w = soil.fast_shear_fraction``,
+    ``K = soil.shear_modulus_m``, ``K_2 = soil.slow_shear_ratio K``; ``w = 1`` is Janosi & Hanamoto (1961) exactly.
+
+    Two deformation scales in one monotone curve. Janosi-Hanamoto's single exponential is Wong's curve for loose
+    sand (Wong 2010, *Terramechanics and Off-Road Vehicle Engineering*, sec. 2.4); Wong's curves for other soils
+    already use two displacement parameters (a hump over ``K_w`` then a residual, Wong 1983), and Bekker's (1956)
+    shear equation is a combination of two exponentials. This sum of two Janosi-Hanamoto terms with positive
+    weights is a MODELLING CHOICE (no published calibration of this exact form for sand was found): a grousered
+    wheel engages part of the soil strength within a few millimetres (soil locked between the grousers and the
+    sheared layer under them), the rest only as the failure zone under the slipping wheel grows with the
+    displacement. It is the rolling wheel's curve: sideways, the law keeps Ishigami et al.'s (2007) own
+    Janosi-Hanamoto curve with ``K_y``.
+    """
+    k_m = soil.shear_modulus_m
+    w = soil.fast_shear_fraction
+    fast = 1.0 - np.exp(-j_abs / k_m)
+    if w >= 1.0:
+        return fast
+    return w * fast + (1.0 - w) * (1.0 - np.exp(-j_abs / (soil.slow_shear_ratio * k_m)))
 
 
 def bulldozing_per_width(soil: SoilParams, z: np.ndarray | float) -> np.ndarray | float:
@@ -103,7 +152,7 @@ def integrate(
     r, b = wheel.radius_m, wheel.width_m
     rs = r + wheel.grouser_height_m
     tan_phi = math.tan(math.radians(soil.friction_angle_deg))
-    c, K = soil.cohesion_pa, soil.shear_modulus_m
+    c = soil.cohesion_pa
     k = soil.k_c / b + soil.k_phi
     n = soil.n0 + soil.n1 * abs(slip)
     a_rim, a_x = _kinematics(slip)
@@ -116,7 +165,7 @@ def integrate(
     th_e = np.where(front, th, th1 - th / np.maximum(thm, 1e-12) * (th1 - thm))
     sigma = k * np.maximum(r * (np.cos(th_e) - np.cos(th1)), 0.0) ** n
     j = rs * (a_rim * (th1 - th) - a_x * (np.sin(th1) - np.sin(th)))
-    tau = (c + sigma * tan_phi) * (1.0 - np.exp(-np.abs(j) / K)) * np.sign(j)
+    tau = (c + sigma * tan_phi) * mobilisation(np.abs(j), soil) * np.sign(j)
     dth = th1[:, 0] / (N_THETA - 1)
 
     def trap(y: np.ndarray) -> np.ndarray:
@@ -133,7 +182,7 @@ def integrate(
         j0 = rs * (a_rim * th1[:, 0] - a_x * np.sin(th1[:, 0]))
         x = np.linspace(0.0, lf, N_FLAT)[None, :]
         jf = j0[:, None] + (a_rim - a_x) * x
-        mob = ((1.0 - np.exp(-np.abs(jf) / K)) * np.sign(jf)).mean(axis=1)
+        mob = (mobilisation(np.abs(jf), soil) * np.sign(jf)).mean(axis=1)
         h_f = b * lf * (c + sig_f * tan_phi) * mob
         W = W + b * lf * sig_f
         H = H + h_f

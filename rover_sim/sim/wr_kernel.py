@@ -25,7 +25,7 @@ from rover_sim.sim.soil_tables import N_LOAD, N_SLIP
 BOW_M = 0.002  # advance over which the front-loaded (resisting) stress distribution forms
 VEL_FILTER_S = 0.1  # window of the net motion that renews the soil under the patch
 ROLLING_EPS_M_S = 1e-4  # rim speeds below this count as "not rolling" for the reported slip ratio
-BRISTLE_DAMPING_RATIO = 0.7  # damping ratio of the shear spring (initial stiffness F_max / 2K) per wheel
+BRISTLE_DAMPING_RATIO = 0.7  # damping ratio of the shear spring (initial stiffness F_max / 2 K_0) per wheel
 
 UPDATE_M = 0.02  # contact travel between rut writes (half a 4 cm cell)
 BERM_CELLS = 2
@@ -33,8 +33,9 @@ BERM_SPREAD = 5.0  # a berm is at least this many rut depths wide
 
 # rows of the law's per-wheel output block (WheelSoilLaw.out_state)
 OUT_LOAD, OUT_SINKAGE, OUT_SLIP, OUT_LONG, OUT_LAT, OUT_CONTACT, OUT_TORQUE = range(7)
-# columns of the per-material constants (WheelSoilLaw.consts)
-C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1 = range(7)
+# columns of the per-material constants (WheelSoilLaw.consts): C_K the longitudinal curve's short scale, C_K0 its
+# initial one (soil_tables.SoilParams.initial_shear_modulus_m, for the shear spring's damping), C_KY the lateral K_y
+C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0 = range(8)
 # entries of the deformable terrain's float parameters (DeformableTerrain)
 P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_WALL_TAN = range(8)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for a double
@@ -187,7 +188,7 @@ def wr_wheels(
         mat = materials[w]
         rows = tables[mat]
         inv_du, tan_phi, coh = consts[mat, C_INV_DU], consts[mat, C_TAN_PHI], consts[mat, C_COHESION]
-        K, Ky, n0, n1 = consts[mat, C_K], consts[mat, C_KY], consts[mat, C_N0], consts[mat, C_N1]
+        k0, Ky, n0, n1 = consts[mat, C_K0], consts[mat, C_KY], consts[mat, C_N0], consts[mat, C_N1]
         # step 1: shear states, renewed by the net advance over the soil
         vf[w, 0] += alpha * (v_rim - vf[w, 0])
         vf[w, 1] += alpha * (v_x - vf[w, 1])
@@ -222,9 +223,9 @@ def wr_wheels(
             f_lat *= f_max / f_t
         f_lat += mob * W * fbn * (1.0 if jy >= 0 else -1.0)
         # step 5: damping of the shear springs (LuGre sigma_1), zero at steady state
-        sigma1 = BRISTLE_DAMPING_RATIO * 2.0 * math.sqrt(f_max / (2.0 * K) * mass_share_kg)
+        sigma1 = BRISTLE_DAMPING_RATIO * 2.0 * math.sqrt(f_max / (2.0 * k0) * mass_share_kg)
         f_long += sigma1 * (jx - jx0) / dt_s
-        f_lat += sigma1 * (K / Ky) * (jy - jy0) / dt_s
+        f_lat += sigma1 * (k0 / Ky) * (jy - jy0) / dt_s
         f_cap = f_max + W * fbn + W * rn
         f_t = math.sqrt(f_long * f_long + f_lat * f_lat)
         if f_t > f_cap:

@@ -4,6 +4,7 @@ The default Bekker law is tested in test_terramechanics.py."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -14,7 +15,8 @@ from rover_sim.errors import ConfigError
 from rover_sim.mission.scenario import load_scenario
 from rover_sim.sim import terramechanics, terramechanics_wr
 from rover_sim.sim.physics import RoverSim
-from rover_sim.sim.terramechanics_wr import BEDROCK, SAND, WheelSoilLaw, pack_inputs
+from rover_sim.sim.soil_tables import mobilisation
+from rover_sim.sim.terramechanics_wr import BEDROCK, DRIFT, MIXED, SAND, WheelSoilLaw, pack_inputs
 
 W_N = 108.0  # one sixth of MER's weight on Mars
 DT = 0.005
@@ -154,6 +156,29 @@ def test_same_seed_same_terrain_bytes_and_same_slip():
     r1 = measure_slip("sand", 15.0, drive_m=1.0, warmup_m=0.3, seed=7)
     r2 = measure_slip("sand", 15.0, drive_m=1.0, warmup_m=0.3, seed=7)
     assert r1.slip == r2.slip and r1.made_good_m == r2.made_good_m
+
+
+def test_two_scale_shear_curve_reduces_to_janosi_hanamoto_and_keeps_rising():
+    """w = 1 (bedrock, mixed, drift) is Janosi-Hanamoto bit for bit; SAND's two-scale curve mobilises its fast part
+    within a few K, keeps rising beyond it (concave, below the strength) and starts with the slope 1 / K_0."""
+    j = np.linspace(0.0, 0.3, 3001)
+    for soil in (BEDROCK, MIXED, DRIFT):
+        assert soil.fast_shear_fraction == 1.0
+        k = soil.shear_modulus_m
+        np.testing.assert_array_equal(mobilisation(j, soil), 1.0 - np.exp(-j / k))
+        assert soil.initial_shear_modulus_m == k
+    w, k1, k2 = SAND.fast_shear_fraction, SAND.shear_modulus_m, SAND.slow_shear_ratio * SAND.shear_modulus_m
+    assert 0.0 < w < 1.0 and k2 > k1
+    m = mobilisation(j, SAND)
+    assert np.all(np.diff(m) > 0) and np.all(np.diff(m, 2) < 1e-12) and m[-1] < 1.0
+    at = mobilisation(np.array([3 * k1, 3 * k2]), SAND)
+    assert at[0] < 0.6 and at[1] > 0.9  # short of the strength at 3 K_1 (slow part rising); nearly all at 3 K_2
+    slope = mobilisation(np.array([1e-7]), SAND)[0] / 1e-7
+    assert slope == pytest.approx(1.0 / SAND.initial_shear_modulus_m, rel=1e-4)
+    with pytest.raises(ValueError, match="fast_shear_fraction"):
+        dataclasses.replace(SAND, fast_shear_fraction=0.0)
+    with pytest.raises(ValueError, match="slow_shear_ratio"):
+        dataclasses.replace(SAND, slow_shear_ratio=0.5)
 
 
 def test_bedrock_params_are_stiffer_than_sand():

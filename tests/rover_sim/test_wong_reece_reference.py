@@ -6,9 +6,15 @@ over slip 0.05-0.95 to the table's interpolation error. The MER wheel's delibera
 
 * the compliant rim's flat patch carries load at the full sinkage, so the wheel sinks about half as deep
   (sinkage ratio law / rigid 0.4-0.7);
-* grousers (shear at r + h_g) and the flat patch add thrust: DP/W is higher by 0.1-0.45 (the rigid, smooth
-  0.25 m wheel barely pulls in this sand: DP/W <= 0.11), torque higher by 0-40 % (measured at most 36 % with
-  c = 1 kPa: the flat patch's cohesive shear c b l_f acts at r + h_g whatever the sinkage).
+* grousers (shear at r + h_g) and the flat patch add thrust: DP/W is higher by 0.15-0.7, growing with slip
+  (measured 0.18 at i = 0.05 to 0.65 at i = 0.95: the rigid, smooth 0.25 m wheel does not pull in this sand, DP/W
+  -0.16 to -0.05, because with 80 % of the strength mobilised over K_2 = 7.5 cm its short arc shears too little
+  to overcome the compaction resistance of its 13-61 mm sinkage; the MER wheel sinks half as deep and its flat
+  patch keeps shearing at the slip rate), torque higher by 0-40 % (measured 4-34 % with c = 1 kPa: the flat
+  patch's cohesive shear c b l_f acts at r + h_g whatever the sinkage).
+
+Both models use the same two-scale shear curve (``soil_tables.mobilisation``; written separately in the
+reference), so the rigid-wheel agreement checks it too.
 """
 
 from __future__ import annotations
@@ -45,7 +51,7 @@ def test_mer_wheel_differences_are_bounded(reference):
     for s, ref in reference.items():
         z, h, r, t, *_ = law.lookup(0, W_N, s)
         assert 0.4 <= z / ref["z"] <= 0.7, s
-        assert 0.1 <= (h - r) - ref["DP"] / W_N <= 0.45, s
+        assert 0.15 <= (h - r) - ref["DP"] / W_N <= 0.7, s
         assert 1.0 <= W_N * R_M * t / ref["T"] <= 1.4, s
 
 
