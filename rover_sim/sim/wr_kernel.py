@@ -286,8 +286,10 @@ def write_rut(h: np.ndarray, h0: np.ndarray, soft: np.ndarray, hfield: np.ndarra
     ``dirty`` boxes over the changed cells. See :mod:`rover_sim.sim.deform` for the shape."""
     nrow, ncol = h.shape
     cell, base, scale, width, wall_tan = p[P_CELL], p[P_BASE], p[P_SCALE], p[P_WIDTH], p[P_WALL_TAN]
-    # behind: the patch; ahead: the patch plus the travel until the next write and a cell
-    back, front, half_w = 0.5 * lp + 0.5 * cell, 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
+    # ahead: the patch plus the travel until the next write and a cell; behind the same, so a wheel that digs in
+    # without advancing has a pit its rim does not touch at the back either (the ground plate sees the floor)
+    front, half_w = 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
+    back = front
     shoulder = half_w + z / wall_tan  # the rut's walls stand at the soil's angle of repose
     reach = shoulder + py_max(BERM_CELLS * cell, BERM_SPREAD * z)
     span = int(math.ceil(py_max(front, reach) / cell)) + 1
