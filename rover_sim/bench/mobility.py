@@ -41,8 +41,9 @@ SOIL_MODEL = "wong_reece"
 EXPERIMENTAL_NOTE = (
     "EXPERIMENTAL wheel-soil law (soil_model = wong_reece, opt-in; the default is bekker). Known misses of issue #13's"
     " acceptance: real-time factor with deformation below its 50x bar where bare MuJoCo itself runs near 50x (the"
-    " ratio to bare MuJoCo is met); columbia_hills_drag fails its criteria with it"
-    " (VO error); the wheel's cylinder contact geometry (item 4) is not built. purgatory_ripple (item 5) is a"
+    " ratio to bare MuJoCo is met); columbia_hills_drag fails its criteria with it (its forward drive drags the"
+    " locked wheel leading: the rover yaws off the site, or stalls with ruts; physics, see the README); the wheel's"
+    " cylinder contact geometry (item 4) is not built. purgatory_ripple (item 5) is a"
     " catalogue scenario; the rerun recording shows the ruts (1 m ground tiles re-logged where they change)."
 )
 
