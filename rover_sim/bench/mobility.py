@@ -39,12 +39,11 @@ EAGLE_DEG = (17.0, 18.0, 19.0, 20.0)  # issue #13: 40-65 % uphill sand slip acro
 MAX_WARMUP_M = 3.0  # commanded travel after which the slip window opens even if the wheelbase is not made good
 SOIL_MODEL = "wong_reece"
 EXPERIMENTAL_NOTE = (
-    "EXPERIMENTAL wheel-soil law (soil_model = wong_reece, opt-in; the default is bekker). Known misses of issue #13's"
-    " acceptance: real-time factor with deformation below its 50x bar where bare MuJoCo itself runs near 50x (the"
-    " ratio to bare MuJoCo is met); columbia_hills_drag fails its criteria with it (its forward drive drags the"
-    " locked wheel leading: the rover yaws off the site, or stalls with ruts; physics, see the README); the wheel's"
-    " cylinder contact geometry (item 4) is not built. purgatory_ripple (item 5) is a"
-    " catalogue scenario; the rerun recording shows the ruts (1 m ground tiles re-logged where they change)."
+    "EXPERIMENTAL wheel-soil law (soil_model = wong_reece, opt-in; the default is bekker): the two-scale shear curve,"
+    " the wheels' own cylinder contact on ground plates (sim/ground_plates.py), deformable terrain. Not yet the"
+    " default because the catalogue does not all pass with it: spirit_autonav touches a 29 cm rock (GESTALT's"
+    " path differs), and columbia_hills_drag drives forward with the locked wheel leading, which crawls (Spirit"
+    " drove backwards; reversed, it passes). See the README."
 )
 
 
