@@ -13,8 +13,8 @@ that sinkage becomes geometry, as in Chrono's SCM but on MuJoCo's heightfield gr
   slumps into a rut's sides;
 * **berms**: the soil a wheel pushes down is put back beside the rut (the cells from the walls' top out to
   ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally; wider beside a deeper rut, so a wheel digging in
-  spreads the soil outward: its berm's crest, next to the rut, stays below the rut's depth): volume is conserved
-  to the grid's resolution;
+  spreads the soil outward: its crest stays about as low as the rut is deep, up to 1.24x where wheels dig in
+  as they start, tests/rover_sim/test_purgatory.py): volume is conserved to the grid's resolution;
 * **multipass / compaction**: a rut is plastic: a later wheel deepens it only where its own sinkage is larger
   (SCM's loading-only-beyond-the-previous-maximum); the law is told the rut depth ahead of each wheel
   (``law.presink_m``), so only the new compaction resists (a second pass sinks less and rolls easier);
