@@ -1,7 +1,7 @@
-"""`rover-sim bench slip --soil-model wong_reece`: the mobility benchmark of the EXPERIMENTAL Wong–Reece law.
+"""`rover-sim bench slip`: the mobility benchmark of the default Wong–Reece law (issue #13).
 
-The default ``bench slip`` (rover_sim/bench/slip.py) measures the default Bekker law and is unchanged; this module
-runs only on request, every rover with ``soil_model="wong_reece"``. All on uniform slopes at the scenarios' 0.04 m
+``bench slip --soil-model bekker`` (rover_sim/bench/slip.py) measures the earlier Bekker patch law; this module
+runs every rover with ``soil_model="wong_reece"``. All on uniform slopes at the scenarios' 0.04 m
 cells with the deformable terrain on (except the parked and speed rows, which say so):
 
 * the uphill slip table (as in bench slip, but measured in the multipass steady state: see :func:`measure_slip`)
@@ -15,7 +15,7 @@ cells with the deformable terrain on (except the parked and speed rows, which sa
   new sinkage (below the rut) against the first pass's (below the surface it met);
 * the single-wheel sinkage ratio at slip 0.6 (same load), from the law.
 
-The law is experimental: it misses several of issue #13's acceptance items (``EXPERIMENTAL_NOTE``, printed first).
+``LAW_NOTE`` (printed first) says which law and contact it measures.
 """
 
 from __future__ import annotations
@@ -38,13 +38,10 @@ CELL_M = 0.04  # the scenarios' cell size
 EAGLE_DEG = (17.0, 18.0, 19.0, 20.0)  # issue #13: 40-65 % uphill sand slip across this range (Eagle crater)
 MAX_WARMUP_M = 3.0  # commanded travel after which the slip window opens even if the wheelbase is not made good
 SOIL_MODEL = "wong_reece"
-EXPERIMENTAL_NOTE = (
-    "EXPERIMENTAL wheel-soil law (soil_model = wong_reece, opt-in; the default is bekker): the two-scale shear curve,"
-    " the wheels' own cylinder contact on ground plates (sim/ground_plates.py), deformable terrain. Not yet the"
-    " default because bench suite does not all pass with it: columbia_hills_drag drives forward with the locked"
-    " wheel leading and crawls (reversed as Spirit drove, the ideal profile still misses VO 2 % over a 0.81 m"
-    " crawl), and spirit_autonav leaves the site on the ideal profile (with ruts on it brushes a 27 cm rock)."
-    " See the README."
+LAW_NOTE = (
+    "Wong-Reece wheel-soil law (the default soil_model; --soil-model bekker measures the earlier patch law): the"
+    " two-scale shear curve, the wheels' own cylinder contact on ground plates (sim/ground_plates.py), and the"
+    " deformable terrain (opt-in in scenarios: physics.deformable = true)."
 )
 
 
@@ -308,7 +305,7 @@ def _fine_sweep(seed: int) -> dict[float, float]:
 
 def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "runs/bench_slip.png") -> dict:
     """`rover-sim bench slip --soil-model wong_reece`: the slip table, the held-out mobility checks, speed."""
-    print(f"> {EXPERIMENTAL_NOTE}\n", flush=True)
+    print(f"> {LAW_NOTE}\n", flush=True)
     rows = [measure_slip(m, a, seed=seed) for m in ("sand", "bedrock") for a in SLOPES_DEG]
     fine = _fine_sweep(seed)
     steps = [abs(fine[a + 1] - fine[a]) for a in np.arange(10.0, 25.0)]
@@ -405,7 +402,7 @@ def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "run
         print(f"| {name} | {val} | {acc} | {'yes' if ok else 'NO'} |")
     result = {
         "soil_model": SOIL_MODEL,
-        "experimental": True,
+        "experimental": False,
         "slip": [{"material": r.material, "slope_deg": r.slope_deg, "slip": r.slip} for r in rows],
         "slip_fine_sand": {f"{a:.0f}": s for a, s in fine.items()},
         "realtime_factor": rtf,

@@ -54,8 +54,8 @@ SoilModelOpt = Annotated[
     str,
     typer.Option(
         "--soil-model",
-        help="bekker (default: the slip benchmark of the default law) or wong_reece (EXPERIMENTAL: the issue-13 "
-        "mobility benchmark with deformable terrain; slow, writes --png).",
+        help="wong_reece (default: the mobility benchmark of the default law, deformable terrain; writes --png) or "
+        "bekker (the slip table of the earlier patch law).",
     ),
 ]
 
@@ -65,7 +65,7 @@ def bench_slip(
     json: JsonOpt = None,
     seed: int = 0,
     junit: JunitOpt = None,
-    soil_model: SoilModelOpt = "bekker",
+    soil_model: SoilModelOpt = "wong_reece",
     png: Annotated[str, typer.Option(help="wong_reece only: PNG of DP/W vs slip and slip vs slope.")] = (
         "runs/bench_slip.png"
     ),

@@ -21,7 +21,7 @@ Where each error arises (:mod:`rover_sim.sim.sensors` applies them; the onboard 
   sensors) turning it on raised the mean slip from 3.8 to 8.7 % and the DR error from 3.9 to 9.5 % of distance,
   and it would shift every slip anchor ``bench slip`` was calibrated on (made with the undeformed radius, as
   Wong's rigid-wheel slip is defined). So it stays off until the soil law is recalibrated with it. The
-  experimental ``wong_reece`` law does not model it.
+  ``wong_reece`` law (the scenarios' default) does not model it either.
 * ``heading_error_deg``: the heading of the operator-given start pose (from sun finding) is off by a draw of this
   1 sigma; the truth is not changed. MER sun finding gave heading to about 1.5 deg (Ali et al. 2005, "Attitude and
   position estimation on the Mars Exploration Rovers", as quoted by Wang et al. 2018); we read that as a 3-sigma

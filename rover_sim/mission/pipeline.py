@@ -320,7 +320,7 @@ class Mission:
         if self.sol is not None:
             self.world.sync_clock()
             self.sol.on_tick(t, truth.position_xyz_m, self.onboard.dead_reckoning.distance_m)
-        if sim.soil_model != "bekker":  # experimental soil only: left_terrain / slid_down_slope halts (issue #13)
+        if sim.soil_model != "bekker":  # the Wong-Reece law: left_terrain / slid_down_slope halts (issue #13)
             issue = sim.safety_issue()
             if issue is not None:
                 raise Halt(*issue)

@@ -45,7 +45,7 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     (out_dir / "timing.json").write_text(json.dumps(metrics.timing | {"wall_s": metrics.wall_s}, indent=2))
     (out_dir / "scenario.json").write_text(json.dumps(mission.sc.resolved_dict(), indent=2))
     (out_dir / "events.log").write_text("\n".join(mission.events) + "\n")
-    if mission.sim.deform is not None:  # only with [physics] deformable = true (experimental)
+    if mission.sim.deform is not None:  # only with [physics] deformable = true (opt-in)
         save_terrain_npz(mission.terrain, mission.terrain.heights_m, out_dir / "terrain_before.npz")
         save_terrain_npz(mission.terrain, mission.sim.terrain_heights_m(), out_dir / "terrain_after.npz")
     tdir = out_dir / "trajectories"

@@ -324,9 +324,6 @@ class SolSpec(_Spec):
     benchmark_only: bool = Field(False, description="A bench traverse case, not part of the scenario catalogue.")
 
 
-SOIL_MODEL_DEFAULTS = {"soil_model": "bekker", "deformable": False}
-
-
 class PhysicsSpec(_Spec):
     timestep_s: float = Field(
         0.005, ge=0.0005, le=0.01,
@@ -334,10 +331,13 @@ class PhysicsSpec(_Spec):
         "coarser step trades slip accuracy for speed (README: Speed of long drives).",
     )
     soil_model: Literal["bekker", "wong_reece"] = Field(
-        "bekker",
-        description="Wheel-soil law: 'bekker' (default) or the experimental 'wong_reece' (README: Experimental soil).",
+        "wong_reece",
+        description="Wheel-soil law: 'wong_reece' (default: stress distribution, two-scale shear, the wheels' own "
+        "cylinder contact) or the earlier 'bekker' patch law (README: The wheel-soil law).",
     )
-    deformable: bool = Field(False, description="Ruts, berms and multipass in the heightfield; needs 'wong_reece'.")
+    deformable: bool = Field(
+        False, description="Ruts, berms and multipass in the heightfield (opt-in); needs 'wong_reece'."
+    )
 
     @model_validator(mode="after")
     def _deformable_needs_wong_reece(self) -> PhysicsSpec:
@@ -432,10 +432,6 @@ class Scenario(_Spec):
 
     def resolved_dict(self) -> dict[str, Any]:
         d = json.loads(self.model_dump_json(by_alias=True))
-        # the opt-in soil fields appear only when set: the default scenario.json and sweep job ids stay as they were
-        for key, default in SOIL_MODEL_DEFAULTS.items():
-            if d["physics"].get(key) == default:
-                del d["physics"][key]
         if d["terrain"].get("streamed", 0) is None:  # opt-in streaming: whole-site scenario.json files unchanged
             del d["terrain"]["streamed"]
         if d["terrain"].get("drift_ripples", 0) == []:  # opt-in drift (purgatory_ripple): other files unchanged

@@ -115,7 +115,7 @@ class World:
             streamer=self.streamer,
             texture_fn=self._painter,
         )
-        if scenario.physics.deformable:  # experimental, wong_reece only: ruts, berms, multipass (sim/deform.py)
+        if scenario.physics.deformable:  # opt-in, wong_reece only: ruts, berms, multipass (sim/deform.py)
             self.sim.enable_deformation()
         self.sim.lock_wheels(list(scenario.faults.locked_wheels))
         st = scenario.start

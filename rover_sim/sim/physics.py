@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from rover_sim.sim.stream import TerrainStreamer
     from terrains import Terrain
 
-SOIL_MODELS = ("bekker", "wong_reece")  # [physics] soil_model: the default law, the experimental opt-in one
+SOIL_MODELS = ("bekker", "wong_reece")  # the earlier patch law (this class's default), the scenarios' default
 
 WHEEL_RADIUS_M = 0.125
 WHEEL_WIDTH_M = 0.16
@@ -71,11 +71,13 @@ class RoverSim:
     """A MER rover on a terrain: physics, the wheel–soil law and named accessors.
 
     ``soil_law=False`` gives the bare MuJoCo model (frictionless wheels, nothing applied) for speed comparisons.
-    ``soil_model`` picks the wheel-soil law: ``"bekker"`` (default, :mod:`rover_sim.sim.terramechanics`) or the
-    experimental ``"wong_reece"`` (:mod:`rover_sim.sim.terramechanics_wr`), the only one that supports
-    :meth:`enable_deformation`. With a ``streamer`` (``[terrain.streamed]``), ``terrain`` is the first window
-    and the heightfield follows the rover (:mod:`rover_sim.sim.stream`); ``texture_fn(window)`` paints each
-    window for the render model (:attr:`spec` is rebuilt for the current window when asked for).
+    ``soil_model`` picks the wheel-soil law: ``"bekker"`` (this class's default, the earlier patch law,
+    :mod:`rover_sim.sim.terramechanics`) or ``"wong_reece"`` (the scenarios' default,
+    :mod:`rover_sim.sim.terramechanics_wr`, with its own wheel contact, :mod:`rover_sim.sim.ground_plates`), the
+    only one that supports :meth:`enable_deformation`. With a ``streamer`` (``[terrain.streamed]``), ``terrain``
+    is the first window and the heightfield follows the rover (:mod:`rover_sim.sim.stream`);
+    ``texture_fn(window)`` paints each window for the render model (:attr:`spec` is rebuilt for the current
+    window when asked for).
     """
 
     def __init__(
@@ -343,7 +345,7 @@ class RoverSim:
         apply_wheel_wrenches(sd, self._forces, self._wheel_body, self._xipos, self._xfrc)
 
     def _apply_soil_law_wr(self, dt: float) -> None:
-        """The experimental Wong-Reece law, compiled (sim/wr_kernel.py): forces plus the soil's torque about each
+        """The Wong-Reece law, compiled (sim/wr_kernel.py): forces plus the soil's torque about each
         axle, applied as wrenches; then the ruts."""
         sd = self._sd_view
         materials_under(sd, self._h_grid, self._mat_grid, self._grid, ROCK_CONTACT_MARGIN_M, MATERIAL_ROCK,
@@ -360,7 +362,7 @@ class RoverSim:
         below the ground, ``("slid_down_slope", why)`` when the rover has moved faster than any drive command could
         move it (MER's wheels turn at most 5 cm/s) over the last ``window_s`` (net displacement over that time, from
         the calls' samples: a slide is sustained; a jolt of a wheel in a deep rut or a stick-slip lurch is not):
-        the slope is too steep for the soil to hold. None otherwise. Missions check it only with the experimental
+        the slope is too steep for the soil to hold. None otherwise. Missions check it only with the Wong-Reece
         soil model (see Mission.tick), at 8 Hz."""
         t = self.time_s
         c = self.wheel_centres_m()

@@ -22,7 +22,8 @@ W_N = 108.0  # one sixth of MER's weight on Mars
 DT = 0.005
 
 
-def test_opt_in_selects_the_law_and_the_default_is_bekker():
+def test_soil_model_selects_the_law_and_the_python_default_is_bekker():
+    """RoverSim's own default stays the Bekker patch law (its unit tests pin it); scenarios default to wong_reece."""
     terrain = slope_terrain("sand", 0.0, size_m=(4.0, 4.0))
     default = RoverSim(terrain)
     assert default.soil_model == "bekker" and type(default.law) is terramechanics.WheelSoilLaw
@@ -37,15 +38,17 @@ def test_opt_in_selects_the_law_and_the_default_is_bekker():
 
 def test_scenario_physics_fields_select_the_law():
     sc = load_scenario("wopmay")
-    assert (sc.physics.soil_model, sc.physics.deformable) == ("bekker", False)
-    assert "soil_model" not in sc.resolved_dict()["physics"]  # default scenario.json / sweep job ids unchanged
+    assert (sc.physics.soil_model, sc.physics.deformable) == ("wong_reece", False)  # the default law; ruts opt-in
+    assert sc.resolved_dict()["physics"]["soil_model"] == "wong_reece"  # stated in scenario.json and job ids
+    old = load_scenario("wopmay", ["physics.soil_model=bekker"])
+    assert old.resolved_dict()["physics"]["soil_model"] == "bekker"
     on = load_scenario("wopmay", ["physics.soil_model=wong_reece", "physics.deformable=true"])
     assert (on.physics.soil_model, on.physics.deformable) == ("wong_reece", True)
     assert on.resolved_dict()["physics"]["soil_model"] == "wong_reece"
     with pytest.raises(ConfigError, match="soil_model"):
         load_scenario("wopmay", ["physics.soil_model=scm"])
     with pytest.raises(ConfigError, match="physics.deformable = true needs physics.soil_model = 'wong_reece'"):
-        load_scenario("wopmay", ["physics.deformable=true"])
+        load_scenario("wopmay", ["physics.soil_model=bekker", "physics.deformable=true"])
     with pytest.raises(ConfigError, match=r"spirit_plains_sol.toml.*not supported on a streamed terrain"):
         load_scenario("spirit_plains_sol", ["physics.soil_model=wong_reece", "physics.deformable=true"])
 
