@@ -36,8 +36,8 @@ def waypoint_votes(
     Without ``cost`` (or when it walls the rover in: no arc ends on a cell with a way to the goal) distances are
     straight lines and heading is the cosine of the angle to the goal's bearing.
     With a :class:`CostToGo` field, distance is the path cost still to go (so a detour round a rock is progress)
-    and heading is the progress made by going on along the arc to ``heading_lookahead_m`` (a point turn: straight
-    on after the turn; -1 into a wall).
+    and heading is the progress made by going on forward to ``heading_lookahead_m`` (a forward arc along its circle,
+    a point turn straight on after the turn, a backward arc straight ahead of the nose from its end; -1 into a wall).
     """
     p = params
     x, y, yaw = (float(v) for v in pose_xy_yaw)
@@ -71,24 +71,33 @@ def waypoint_votes(
         with np.errstate(invalid="ignore"):
             progress = np.where(driven > 0, (c_now - c_end) / np.maximum(driven, 1e-9), 0.0)
         progress = np.where(np.isfinite(c_end), np.clip(progress, -1.0, 1.0), -1.0)
-        # heading: the progress the arc goes on making up to heading_lookahead_m (a point turn: then straight on)
+        # heading: the progress the rover makes going on forward from where the arc leaves it, up to
+        # heading_lookahead_m: a forward arc goes on along its circle, a point turn straight on after the turn, and a
+        # backward arc straight ahead of the rover's nose from the end of its step (it faces the way on only if its
+        # front, where its hazcams look, points there; backing on along the circle would score a blind reverse
+        # drive as well-aimed and lead the rover metres backwards through ground it has not looked at)
         look = p.heading_lookahead_m
-        far = np.array(
-            [
-                a.poses_xy_yaw[-1] + [look * np.cos(a.turn_rad), look * np.sin(a.turn_rad), 0.0]
-                if a.direction == 0
-                else arc_pose(a.curvature_per_m, a.direction * look)
-                for a in arc_list
-            ]
-        )
+        far = np.array([_look_ahead_pose(a, p.step_distance_m, look) for a in arc_list])
         c_far = cost.at(np.stack([x + c * far[:, 0] - s * far[:, 1], y + s * far[:, 0] + c * far[:, 1]], axis=1))
         with np.errstate(invalid="ignore"):
-            heading = np.clip((c_now - c_far) / look, -1.0, 1.0)
+            # measured from where the look-ahead starts: here, or a backward arc's end
+            c_from = np.where([a.direction < 0 for a in arc_list], c_end, c_now)
+            heading = np.clip((c_from - c_far) / look, -1.0, 1.0)
         heading = np.where(np.isfinite(c_far), heading, -1.0)
         # the goal itself is closer than the look-ahead: face it
         heading = np.where(d_end < look, geometric_heading, heading)
     mix = (p.progress_weight * progress + p.heading_weight * heading) / (p.progress_weight + p.heading_weight)
     return np.clip(0.5 * (1.0 + mix), 0.0, 1.0)
+
+
+def _look_ahead_pose(a: Arc, step_m: float, look_m: float) -> np.ndarray:
+    """Rover-frame point ``look_m`` on from arc ``a`` in the direction the rover then faces (see waypoint_votes)."""
+    if a.direction == 0:
+        return a.poses_xy_yaw[-1] + [look_m * np.cos(a.turn_rad), look_m * np.sin(a.turn_rad), 0.0]
+    if a.direction > 0:
+        return arc_pose(a.curvature_per_m, look_m)
+    end = arc_pose(a.curvature_per_m, -step_m)
+    return end + [look_m * np.cos(end[2]), look_m * np.sin(end[2]), 0.0]
 
 
 def undoes(arc_list: list[Arc], previous: Arc | None, params: GestaltParams = GestaltParams()) -> np.ndarray:

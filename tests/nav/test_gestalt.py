@@ -386,6 +386,22 @@ def test_waypoint_votes_follow_the_detour_not_the_bearing() -> None:
     assert by_cost[straight] < by_cost[arc_list.index(best_cost)] - 0.1
 
 
+def test_a_backward_arc_faces_away_from_the_way_it_backs() -> None:
+    """Goal 6 m straight behind on open ground, path-cost votes: backing straight gains the step's distance
+    (progress +1) but leaves the rover facing away from the goal (heading -1), so its vote is 0.5, not the 1.0 it
+    got while the heading was judged by backing on along the circle (then GESTALT backed blind for metres:
+    spirit_autonav on the Wong-Reece law backed 5 m into the site's edge, session 9). Facing the goal, the same
+    backward arc loses ground and faces the right way: 0.5 again. Driving forward away from the goal: 0."""
+    arc_list = arcs(P)
+    back = next(k for k, a in enumerate(arc_list) if a.direction == -1 and a.curvature_per_m == 0.0)
+    fwd = next(k for k, a in enumerate(arc_list) if a.direction == 1 and a.curvature_per_m == 0.0)
+    for goal in (np.array([-6.0, 0.0]), np.array([6.0, 0.0])):
+        field = cost_to_go(synthetic_window(), np.zeros(3), goal, P)
+        wp = waypoint_votes(arc_list, np.zeros(3), goal, P, field)
+        assert wp[back] == pytest.approx(0.5, abs=0.05)
+        assert wp[fwd] == pytest.approx(0.0 if goal[0] < 0 else 1.0, abs=0.05)
+
+
 def test_an_obstacle_seen_only_from_afar_is_costly_not_a_wall() -> None:
     w = wall_window(gap_y=None)
     near = cost_to_go(w, np.zeros(3), np.array([4.0, 0.0]), P)
