@@ -30,7 +30,7 @@ def slip_cases(result: dict) -> list[Case]:
 
 
 def mobility_cases(result: dict) -> list[Case]:
-    """`bench slip --soil-model wong_reece`: one case per slip row and per mobility check (experimental law)."""
+    """`bench slip --soil-model wong_reece`: one case per slip row and per mobility check (the Wong–Reece law)."""
     from rover_sim.bench.slip import SlipRow, anchor, passes
 
     out = []

@@ -387,7 +387,7 @@ class Scenario(_Spec):
     def _drift_needs_wong_reece(self) -> Scenario:
         if self.terrain.drift_ripples and self.physics.soil_model != "wong_reece":
             raise ValueError(
-                "terrain.drift_ripples need physics.soil_model = 'wong_reece' (the default 'bekker' law has no drift "
+                "terrain.drift_ripples need physics.soil_model = 'wong_reece' (the 'bekker' law has no drift "
                 f"soil); got {self.physics.soil_model!r}"
             )
         if self.physics.deformable and self.terrain.streamed is not None:

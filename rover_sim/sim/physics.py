@@ -226,7 +226,7 @@ class RoverSim:
 
     def enable_deformation(self) -> DeformableTerrain:
         """Make the heightfield deformable under the wheels (ruts, berms, multipass; see sim/deform.py).
-        Experimental; only with ``soil_model="wong_reece"`` (it reads that law's sinkage, axles and presink)."""
+        Only with ``soil_model="wong_reece"`` (it reads that law's sinkage, axles and presink)."""
         if self.soil_model != "wong_reece":
             raise ValueError(f"deformable terrain needs soil_model 'wong_reece', not {self.soil_model!r}")
         if self.streamer is not None:

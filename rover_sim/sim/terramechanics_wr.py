@@ -1,7 +1,8 @@
 """Wheel–soil law: Wong–Reece stress distribution under the MER wheel, driven by a shear-displacement state.
 
-EXPERIMENTAL and opt-in (``[physics] soil_model = "wong_reece"``); the default law is
-:mod:`rover_sim.sim.terramechanics` (Bekker). See the README section on the experimental soil for what it misses.
+The scenarios' default (``[physics] soil_model = "wong_reece"``, issue #13); ``"bekker"`` selects the earlier patch
+law, :mod:`rover_sim.sim.terramechanics`, which ``RoverSim(terrain)`` in Python still defaults to. See the README
+section "Wong–Reece soil" for what it was measured against and what it misses.
 
 MuJoCo supplies only the *normal* wheel load (wheel contacts are frictionless, ``condim=1``); every tangential
 force and the soil's torque on each wheel come from this module, for all six wheels each physics step. Slip is an

@@ -1,4 +1,4 @@
-"""Compiled kernels of the experimental Wong–Reece law and the deformable terrain, run every physics step.
+"""Compiled kernels of the Wong–Reece law and the deformable terrain, run every physics step.
 
 The law (:mod:`rover_sim.sim.terramechanics_wr`), the table look-up (:mod:`rover_sim.sim.soil_tables`), the wheel
 wrenches and the rut writes (:mod:`rover_sim.sim.deform`) are six wheels of scalar arithmetic per 5 ms step. As a
