@@ -126,7 +126,7 @@ def physics_speed(sim_s: float = 20.0, seed: int = 0, round_s: float = 1.0) -> d
 
     ``bare`` is ``mj_step`` alone on this law's model (wheel cylinders on their ground plates, see
     :mod:`rover_sim.sim.ground_plates`), the plates left where the settled rover put them (flat ground), so it
-    costs none of our code; ``bare_sphere`` is ``mj_step`` alone on the default law's model, where MuJoCo tests
+    costs none of our code; ``bare_sphere`` is ``mj_step`` alone on the Bekker law's model, where MuJoCo tests
     each wheel sphere against the heightfield itself (a reference: what "bare MuJoCo" of a rover on a
     heightfield costs).
 
@@ -393,7 +393,7 @@ def run(json_path: str | None = None, seed: int = 0, png_path: str | None = "run
         ("the same by wall clock (shared machine: load-dependent)", f"{rates['deform_wall']:.0f}x", "-", True),
         ("ratio to bare MuJoCo step rate (same run)", f"{rtf_def / rtf_bare:.2f}", ">= 0.5", rtf_def / rtf_bare >= 0.5),
         ("real-time factor, law only / bare MuJoCo", f"{rtf:.0f}x / {rtf_bare:.0f}x", "-", True),
-        ("bare MuJoCo with its own sphere-heightfield wheel contact (the default law's model)",
+        ("bare MuJoCo with its own sphere-heightfield wheel contact (the Bekker law's model)",
          f"{rates['bare_sphere']:.0f}x", "-", True),  # fmt: skip
     ]
     print("| check | measured | acceptance | ok |")
