@@ -3,7 +3,8 @@ textured ground (rocks, outcrop edges, the rover's own tracks) for VO.
 
 Before each VO pair :func:`seek_texture` asks the onboard stack how many trackable features of the previous pair
 the planned view will see (after the dead-reckoned motion). If fewer than ``POOR_VIEW_FEATURES``, it looks at the
-nearby pointings (``CANDIDATES_DEG`` around the current one, within ``MAX_OFFSET_DEG`` of the commanded pointing):
+nearby pointings (``CANDIDATES_DEG`` around the current one, within ``MAX_PAN_OFFSET_DEG`` and
+``MAX_ELEVATION_OFFSET_DEG`` of the commanded pointing):
 for each one that keeps >= 60 % ground overlap with the previous pair (:data:`nav.vo.texture.MIN_OVERLAP`) it
 images a pair and counts the trackable features in the overlap. The choice is logged as an event and counted
 (``pointing_changes``). When no pointing has enough texture for VO (``min_features``), the step is logged as a
@@ -14,10 +15,12 @@ views far from it are poor: pointed steeply down (elevation -64 deg against the 
 ground within a metre of the rover, where a 0.5 m step leaves 7-30 trackable features against 80-120 at -40 deg
 (measured in ``bench autonav`` fields 3, 8 and 14, flight profile). Picking the candidate with the most features
 each time made the mast ratchet away from home one step at a time (-40, -48, -56, -64 deg, then it stayed) and
-VO starve until its consecutive-failure limit stopped the drive. So among the candidates with enough texture
-(``POOR_VIEW_FEATURES``) the one nearest home wins; while off home with a good view, one step back toward home is
-tried before each pair; and when no candidate keeps the overlap (a turn in place: VO re-initialises anyway) the
-mast goes home.
+VO starve until its consecutive-failure limit stopped the drive. The count is of features inside the previous
+pair's view, so it favours the pointing the previous pair was taken from and cannot by itself lead back. So:
+elevation stays within one step (8 deg) of the commanded one, pan within 30 deg; among the candidates with enough
+texture (``POOR_VIEW_FEATURES``) the one nearest home wins; while off home with a good view, one step back toward
+home is tried before each pair; and when the step is lost anyway (no candidate keeps the overlap, or none has
+VO's ``min_features``) the pair is imaged from home, so that the next steps start from the commanded view.
 """
 
 from __future__ import annotations
@@ -34,7 +37,8 @@ if TYPE_CHECKING:
 POOR_VIEW_FEATURES = 60  # the planned view is poor below this many trackable features (3x VO's min_features)
 CANDIDATES_DEG = ((0.0, 0.0), (12.0, 0.0), (-12.0, 0.0), (0.0, 8.0), (0.0, -8.0))  # (pan, elevation) offsets
 PAN_STEP_DEG, ELEVATION_STEP_DEG = 12.0, 8.0  # one step back toward home, at most (the candidates' spacing)
-MAX_OFFSET_DEG = 30.0  # stay within this of the scenario's commanded pointing
+MAX_PAN_OFFSET_DEG = 30.0  # stay within this of the scenario's commanded pan
+MAX_ELEVATION_OFFSET_DEG = 8.0  # and within one candidate step of its elevation (the footprint's range)
 SETTLE_S = 1.0  # a small mast move settles within a second
 
 
@@ -119,31 +123,38 @@ def seek_texture(mission: Mission) -> bool:
     tried: list[PointingCandidate] = []
     for dpan, del_ in CANDIDATES_DEG:
         pan, el = pan0 + dpan, el0 + del_
-        if abs(pan - home[0]) > MAX_OFFSET_DEG or abs(el - home[1]) > MAX_OFFSET_DEG:
+        if abs(pan - home[0]) > MAX_PAN_OFFSET_DEG or abs(el - home[1]) > MAX_ELEVATION_OFFSET_DEG:
             continue
         tried.append(_image_candidate(mission, pan, el))
     best = choose_pointing(tried, home)
     if best is None:  # nothing keeps the overlap (a turn in place): VO cannot track, so restart it from home
         _move_to(mission, *home)
+        back = ""
         if home != (pan0, el0):
             mission.pointing_changes += 1
+            back = f"; mast back to the commanded pan {home[0]:.0f}, elevation {home[1]:.0f} deg"
         mission.event(
-            f"no pointing kept {100 * MIN_OVERLAP:.0f} % ground overlap with the previous pair ({len(tried)} tried); "
-            f"mast to the commanded pan {home[0]:.0f}, elevation {home[1]:.0f} deg; VO refusal justified",
+            f"no pointing kept {100 * MIN_OVERLAP:.0f} % ground overlap with the previous pair ({len(tried)} tried)"
+            f"{back} (VO cannot track across this step: it re-initialises, or a refusal is justified)",
+            "WARN",
+        )
+        return True
+    if best.features < ob.texture_params.min_features:  # VO will refuse this step: image it from home
+        _move_to(mission, *home)
+        back = ""
+        if home != (pan0, el0):
+            mission.pointing_changes += 1
+            back = f"; mast back to the commanded pan {home[0]:.0f}, elevation {home[1]:.0f} deg"
+        mission.event(
+            f"no pointing had texture: best {best.features} trackable features (< {ob.texture_params.min_features}) "
+            f"among {sum(c.overlap >= MIN_OVERLAP for c in tried)} pointings with >= {100 * MIN_OVERLAP:.0f} % "
+            f"overlap; VO refusal justified{back}",
             "WARN",
         )
         return True
     _move_to(mission, best.pan_deg, best.elevation_deg)
     if (best.pan_deg, best.elevation_deg) != (pan0, el0):
         _log_change(mission, planned, best, "")
-    if best.features < ob.texture_params.min_features:
-        mission.event(
-            f"no pointing had texture: best {best.features} trackable features (< {ob.texture_params.min_features}) "
-            f"among {sum(c.overlap >= MIN_OVERLAP for c in tried)} pointings with >= {100 * MIN_OVERLAP:.0f} % "
-            "overlap; VO refusal justified",
-            "WARN",
-        )
-        return True
     return False
 
 
