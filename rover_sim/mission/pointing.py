@@ -85,19 +85,27 @@ def choose_pointing(
 def _image_candidate(mission: Mission, pan_deg: float, elevation_deg: float) -> PointingCandidate:
     """Point the mast, image a pair and count its texture (the onboard stack's view of it)."""
     world, camera = mission.world, mission.sc.nav.camera
-    if (world.mast_pan_deg, world.mast_elevation_deg) != (pan_deg, elevation_deg):
-        mission.point_mast(pan_deg, elevation_deg, settle_s=SETTLE_S)
-    world.calibrate(camera)
+    _move_to(mission, pan_deg, elevation_deg)
     obs = world.observation_with([], [], {camera: world.render(camera)})
     n, overlap = mission.onboard.candidate_texture(obs, camera)
     return PointingCandidate(pan_deg, elevation_deg, n, overlap)
 
 
 def _move_to(mission: Mission, pan_deg: float, elevation_deg: float) -> None:
+    """Point the mast there (if it is not already) and take the onboard calibration at that pointing."""
     world = mission.world
     if (world.mast_pan_deg, world.mast_elevation_deg) != (pan_deg, elevation_deg):
         mission.point_mast(pan_deg, elevation_deg, settle_s=SETTLE_S)
     world.calibrate(mission.sc.nav.camera)
+
+
+def _return_home(mission: Mission, home: tuple[float, float], pan0: float, el0: float) -> str:
+    """Point the mast home for a step VO cannot use; counts the change and returns the event's note on it."""
+    _move_to(mission, *home)
+    if home == (pan0, el0):
+        return ""
+    mission.pointing_changes += 1
+    return f"; mast back to the commanded pan {home[0]:.0f}, elevation {home[1]:.0f} deg"
 
 
 def seek_texture(mission: Mission) -> bool:
@@ -128,11 +136,7 @@ def seek_texture(mission: Mission) -> bool:
         tried.append(_image_candidate(mission, pan, el))
     best = choose_pointing(tried, home)
     if best is None:  # nothing keeps the overlap (a turn in place): VO cannot track, so restart it from home
-        _move_to(mission, *home)
-        back = ""
-        if home != (pan0, el0):
-            mission.pointing_changes += 1
-            back = f"; mast back to the commanded pan {home[0]:.0f}, elevation {home[1]:.0f} deg"
+        back = _return_home(mission, home, pan0, el0)
         mission.event(
             f"no pointing kept {100 * MIN_OVERLAP:.0f} % ground overlap with the previous pair ({len(tried)} tried)"
             f"{back} (VO cannot track across this step: it re-initialises, or a refusal is justified)",
@@ -140,11 +144,7 @@ def seek_texture(mission: Mission) -> bool:
         )
         return True
     if best.features < ob.texture_params.min_features:  # VO will refuse this step: image it from home
-        _move_to(mission, *home)
-        back = ""
-        if home != (pan0, el0):
-            mission.pointing_changes += 1
-            back = f"; mast back to the commanded pan {home[0]:.0f}, elevation {home[1]:.0f} deg"
+        back = _return_home(mission, home, pan0, el0)
         mission.event(
             f"no pointing had texture: best {best.features} trackable features (< {ob.texture_params.min_features}) "
             f"among {sum(c.overlap >= MIN_OVERLAP for c in tried)} pointings with >= {100 * MIN_OVERLAP:.0f} % "
