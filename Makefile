@@ -9,10 +9,10 @@ export MUJOCO_GL ?= egl
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test,dask]'
+	$(BIN)/python -m pip install -q -c constraints.txt -e '.[test,dask]'
 	@touch $(STAMP)
 
 demo: $(STAMP)

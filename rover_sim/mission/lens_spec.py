@@ -35,15 +35,19 @@ camera_rotation_deg        0.05           calibration error of each camera's poi
 stereo_rotation_deg        0.02           calibration error of the right camera relative to the left, per axis:
                                           a stereo calibration leaves 0.1-0.3 px epipolar residuals at 1024^2
                                           (0.82 mrad/px), i.e. 0.1-0.25 mrad of relative pitch; 0.02 deg =
-                                          0.35 mrad, the low end of the issue #16 range 0.02-0.05 deg. It moves
-                                          rectified rows by 0.11 px (1 sigma) at 256^2, 0.43 px at 1024^2.
-                                          Not a published flight number (none found for the MER pairs'
-                                          epipolar accuracy); it dominates the rectified row error: the
-                                          median row error of a draw (from the true vs calibrated models,
+                                          0.35 mrad is above that, kept as the in-flight value (the ground
+                                          calibration shifted by launch, landing and temperature; assumed:
+                                          no published figure found for the MER pairs). It moves rectified
+                                          rows by 0.11 px (1 sigma) at 256^2, 0.43 px at 1024^2, and
+                                          dominates the rectified row error: with the ground calibration
+                                          alone the median row error of a draw (true vs calibrated models,
                                           256^2 navcam) exceeds the issue's 0.3 px bar in 1.4 % of draws
-                                          (1500 draws; 0.3 % at 0.015 deg, none at 0.01 deg).
+                                          (1500 draws). The onboard epipolar check (``[nav]
+                                          epipolar_check``, ``nav.epipolar``) fits the pitch and roll parts
+                                          from the first pairs' rows; the toe-in part stays and biases range
+                                          (3.4 % at 25 m for 0.27 mrad with the navcams' 20 cm baseline).
 baseline_mm                0.3            calibration error of the right camera's position relative to the
-                                          left, per axis (issue #16 range 0.2-0.5 mm; 0.15 % of 20 cm).
+                                          left, per axis (assumed; 0.15 % of 20 cm).
 focal_length_pct           0.05           relative focal-length error per camera (0.6 px at 1024^2 navcam).
 principal_point_px         0.5            principal-point error per axis, full-resolution (1024^2) pixels,
                                           common to both cameras of a pair (the relative part is a rotation).

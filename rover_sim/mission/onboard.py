@@ -28,6 +28,7 @@ import numpy as np
 
 from nav.camera import StereoRig, transform_points
 from nav.dead_reckoning import DeadReckoner
+from nav.epipolar import EpipolarCheck
 from nav.geometry import se3_inv
 from nav.protocols import Planner, StereoMatcher, VisualOdometer
 from nav.rectify import rectification
@@ -108,6 +109,8 @@ class Onboard:
         geometry: RoverGeometry | None = None,
         shape: RoverShape | None = None,
         vo_update: str = "position",
+        epipolar_check: bool = True,
+        on_event: Callable[[str], None] | None = None,
     ) -> None:
         if vo_update not in ("position", "full_pose"):
             raise ValueError(f"[nav.vo] update = {vo_update!r}: allowed values are 'position' and 'full_pose'")
@@ -125,6 +128,9 @@ class Onboard:
         self._vo_takes_mask = vo is not None and accepts_feature_mask(vo)
         self._last_pair: tuple | None = None  # (left, right, rig, mask) of the previous VO pair
         self._rectified: dict[str, tuple[np.ndarray, StereoImages]] = {}  # camera -> (raw left, rectified pair)
+        # per stereo pair: the in-flight epipolar check (nav.epipolar), None when off
+        self.epipolar: dict[str, EpipolarCheck] | None = {} if epipolar_check else None
+        self._on_event = on_event
 
     @property
     def pose(self) -> Pose:
@@ -148,16 +154,32 @@ class Onboard:
 
         Stereo and VO then triangulate with the rectified pinhole rig, which is triangulating through the models:
         each rectified pixel carries the ray its raw pixel has under the calibrated CAHVOR/fisheye model
-        (:mod:`nav.rectify`), so calibration errors reach the estimates as they did on MER. The tables are cached
-        per calibration and the last rectified pair per camera is reused."""
+        (:mod:`nav.rectify`), so calibration errors reach the estimates as they did on MER. With the epipolar
+        check on (``[nav] epipolar_check``), the pair's first images also fit the right camera's relative pitch
+        and roll from their row disparities (:mod:`nav.epipolar`; the toe-in, which biases range, is not
+        observable this way and stays); from the pair that completes the fit on, every pair is rectified with the
+        corrected calibration. The tables are cached per calibration and the last rectified pair per camera is
+        reused."""
         pair = require_observation(obs, "Onboard.rectified").pair(camera)
         if pair.calibration is None:
             return pair
         hit = self._rectified.get(camera)
         if hit is not None and hit[0] is pair.left_u8:
             return hit[1]
-        rect = rectification(pair.calibration)
+        check = None if self.epipolar is None else self.epipolar.setdefault(camera, EpipolarCheck())
+        calib = pair.calibration if check is None else check.calibration(pair.calibration)
+        rect = rectification(calib)
         left, right = rect.apply(pair.left_u8, pair.right_u8)
+        if check is not None and check.correction is None and check.observe(calib, rect.rig, left, right):
+            rect = rectification(check.calibration(pair.calibration))
+            left, right = rect.apply(pair.left_u8, pair.right_u8)
+            fit = check.fit
+            if self._on_event is not None and fit is not None:
+                self._on_event(
+                    f"epipolar check ({camera}): right camera pitch {1e3 * fit.rotation_rad[0]:+.3f} mrad, roll "
+                    f"{1e3 * fit.rotation_rad[2]:+.3f} mrad from {fit.n_matches} corners; row disparity "
+                    f"{fit.before_px:.3f} -> {fit.after_px:.3f} px (median)"
+                )
         out = StereoImages(camera, pair.t_s, left, right, rect.rig)
         self._rectified[camera] = (pair.left_u8, out)
         return out

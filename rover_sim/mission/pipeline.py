@@ -88,6 +88,8 @@ class Mission:
                 planner_factory=lambda: make_planner(nav.planner),
                 shape=rover_shape() if nav.vo.shadow_mask else None,
                 vo_update=nav.vo.update,
+                epipolar_check=nav.epipolar_check,
+                on_event=self.event,
             )
         except BaseException:  # a plugin that does not load, or Ctrl-C: release the renderer's GL context
             self.world.close()

@@ -186,6 +186,11 @@ class NavSpec(_Spec):
         None, gt=0.0, le=2.0, description="Halt when a VO step measures more slip than this (MER: 0.4)."
     )
     image_noise: bool = True
+    epipolar_check: bool = Field(
+        True,
+        description="Flight profile: fit each stereo pair's relative pitch and roll from its first images' row "
+        "disparities and rectify with the corrected calibration (nav/epipolar.py).",
+    )
 
 
 class FaultSpec(_Spec):
