@@ -36,6 +36,10 @@ Then, between sites:
    the match residuals; gross tie points screened out first by :func:`robust_tie_points`), solved every time a
    site is added.
 
+Ground processing between 5 and 6 (:mod:`nav.rocks.range_bias`): the panorama pair's stereo range bias (a toe-in
+calibration error adds a constant to inverse range) is fitted from the rocks matched between sites and the rocks moved
+back along their lines of sight before the final adjustment (self-calibrating bundle adjustment cut to one parameter).
+
 Frames: each site's points and rocks are in that site's *estimated* world frame (x east, y north, z up), i.e. rover
 frame points mapped through the onboard pose estimate at the site; the estimates of two sites differ from the truth
 and from each other by the odometry drift, which is what matching and adjustment recover. A :class:`Pose4` maps
@@ -43,7 +47,8 @@ points of one frame into another. Pure numpy/scipy/OpenCV: nothing here reads gr
 
 Modules, in the order of the steps: :mod:`nav.rocks.params` (parameters and data types), :mod:`nav.rocks.dense`
 (step 0, dense points), :mod:`nav.rocks.extract` (steps 1-3 and the extraction pipeline), :mod:`nav.rocks.models`
-(step 4), :mod:`nav.rocks.match` (step 5), :mod:`nav.rocks.chain` (step 6).
+(step 4), :mod:`nav.rocks.match` (step 5), :mod:`nav.rocks.range_bias` (between 5 and 6), :mod:`nav.rocks.chain`
+(step 6).
 """
 
 from nav.rocks.chain import ChainParams, ChainSite, SiteChain, robust_tie_points

@@ -178,13 +178,18 @@ def build_true_lens(  # noqa: ANN201
     calibration: RunCalibration,
     native_px: int,
     pairs: tuple[str, ...] = STEREO_PAIRS,
+    render_oversample: float | None = None,
 ):
-    """The renderer's :class:`~rover_sim.render.lens.TrueLens` for the cameras of ``pairs`` at ``native_px``."""
+    """The renderer's :class:`~rover_sim.render.lens.TrueLens` for the cameras of ``pairs`` at ``native_px``
+    (``render_oversample``: replaces the spec's, e.g. for the rock survey's panoramas)."""
     from rover_sim.render.lens import TrueLens
 
     names = [f"{p}_{s}" for p in pairs for s in ("left", "right")]
     models = {n: calibration.render_model(camera_model(model, data, n, native_px, native_px)) for n in names}
-    return TrueLens(models, calibration.spec)
+    spec = calibration.spec
+    if render_oversample is not None:
+        spec = spec.model_copy(update={"render_oversample": render_oversample})
+    return TrueLens(models, spec)
 
 
 def render_rectified(renderer, calibration: RunCalibration, pair: str) -> tuple[np.ndarray, np.ndarray, StereoRig]:  # noqa: ANN001

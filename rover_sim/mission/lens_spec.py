@@ -23,7 +23,9 @@ hazcam_max_off_axis_deg    71             raw hazcam pixels farther off axis are
                                           render cannot show the lens' 180 deg diagonal. 71 deg keeps the
                                           rectified 124 deg pinhole view (corners at 69.4 deg) fully covered.
 render_oversample          1.0            ideal pinhole render's centre magnification / the raw model's
-                                          (1: the raw centre pixel is not upsampled).
+                                          (1: the raw centre pixel is not upsampled). Above 1 each raw pixel
+                                          integrates its area of the finer render (``TrueLens``); the rock
+                                          survey's panoramas use 2 (``SurveyConfig.render_oversample``).
 mount_rotation_deg         0.2            true mounting error of each camera, per axis (build tolerance of a
                                           machined bracket); known to the calibration, so rectification
                                           removes it (row misalignment of 1-3 px at 256^2 without it).

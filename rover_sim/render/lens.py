@@ -111,6 +111,10 @@ class TrueLens:
 
     def __init__(self, models: dict[str, CameraModel], spec: LensErrorSpec) -> None:
         self.models = models
+        # above 1x, a raw pixel integrates over its area of the finer render (a CCD photosite does; a point
+        # sample of the finer render would be sharper than any camera): a Gaussian with the variance of a box one
+        # raw pixel wide, ``oversample^2 / 12`` render px^2, before the remap
+        self.area_sigma_px = spec.render_oversample / math.sqrt(12.0) if spec.render_oversample > 1.0 else 0.0
         self.views: dict[str, RenderView] = {}
         for pair in (p for p in STEREO_PAIRS if f"{p}_left" in models):
             ms = [models[f"{pair}_left"], models[f"{pair}_right"]]
@@ -138,5 +142,8 @@ class TrueLens:
     def to_raw(self, luma: np.ndarray, cam_name: str) -> np.ndarray:
         """Float luminance of the wide pinhole render -> the raw camera's image (native size, float32)."""
         mx, my = self.views[pair_of(cam_name)].maps[cam_name]
-        return cv2.remap(luma.astype(np.float32), mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+        luma = luma.astype(np.float32)
+        if self.area_sigma_px > 0.0:
+            luma = cv2.GaussianBlur(luma, (0, 0), self.area_sigma_px)
+        return cv2.remap(luma, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
                          borderValue=0.0)  # fmt: skip

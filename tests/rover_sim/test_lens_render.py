@@ -360,3 +360,28 @@ def test_one_gl_context_draws_every_pair_size_like_an_own_size_context(render_wo
             own.close()
         np.testing.assert_array_equal(frames[pair].left, want.left)
         np.testing.assert_array_equal(frames[pair].right, want.right)
+
+
+def test_oversampled_true_lens_integrates_each_raw_pixel_without_shifting_it() -> None:
+    """``render_oversample`` 2 (the rock survey's panoramas): the raw image reads a render twice as fine, each raw
+    pixel averaging its own area (a Gaussian of a one-raw-pixel box's variance) before the remap. A linear ramp
+    comes through exactly (no shift: the raw pixel reads the render where its ray lands), and fine render detail
+    (a one-render-pixel checkerboard) is averaged away instead of aliased, as a photosite would."""
+    from nav.camera import PinholeCamera
+    from nav.lens import CahvorCamera
+    from rover_sim.render.lens import TrueLens
+
+    pins = [PinholeCamera.from_fov(f"navcam_{s}", 64, 64, 45.0) for s in ("left", "right")]
+    models = {p.name: CahvorCamera.from_pinhole(p, r=(0.0, -0.01, 0.003)) for p in pins}
+    point = TrueLens(models, LensErrorSpec(**{**FLIGHT_DEFAULTS, "render_oversample": 1.0}))
+    area = TrueLens(models, LensErrorSpec(**{**FLIGHT_DEFAULTS, "render_oversample": 2.0}))
+    assert point.area_sigma_px == 0.0 and area.area_sigma_px == pytest.approx(2.0 / np.sqrt(12.0))
+    px = area.views["navcam"].px
+    assert px >= 2 * 64
+    u = np.tile(np.arange(px, dtype=np.float32), (px, 1))
+    raw = area.to_raw(u, "navcam_left")
+    mx = area.views["navcam"].maps["navcam_left"][0]
+    inner = (slice(8, -8), slice(8, -8))
+    np.testing.assert_allclose(raw[inner], mx[inner], atol=1e-3)
+    checker = ((np.indices((px, px)).sum(axis=0) % 2) * 200.0).astype(np.float32)
+    assert np.std(area.to_raw(checker, "navcam_left")[inner]) < 0.2 * np.std(checker)

@@ -201,9 +201,13 @@ def test_flight_panorama_pairs_are_rectified_with_the_calibrated_models() -> Non
                                            w.mast_pan_deg, w.mast_elevation_deg)  # fmt: skip
         true_rig = sv.renderer.rig("navcam")
         raw = sv.renderer.render_pair("navcam")
+        check = sv.mission.onboard.epipolar["navcam"]  # the onboard epipolar check (nav.epipolar)
     assert calib is not None and pair.calibration is None and pair.left_u8.shape == (256, 256)
-    assert np.allclose(pair.rig.left.T_rover_cam, rig.left.T_rover_cam)
-    assert np.allclose(pair.rig.right.T_rover_cam, rectification(calib).rig.right.T_rover_cam)
+    # the calibrated models as the epipolar check corrected them (relative pitch and roll only: within 0.1 deg)
+    checked = rectification(check.calibration(calib)).rig
+    assert np.allclose(pair.rig.left.T_rover_cam, checked.left.T_rover_cam)
+    assert np.allclose(pair.rig.right.T_rover_cam, checked.right.T_rover_cam)
+    assert np.allclose(pair.rig.left.T_rover_cam, rig.left.T_rover_cam, atol=2e-3)
 
     # the stereo baseline stereo uses is the calibrated one (seeded error, 0.3 mm per axis), not the true one
     def baseline(r) -> np.ndarray:  # noqa: ANN001
@@ -246,9 +250,9 @@ def test_bench_rocks_meets_the_acceptance(tmp_path) -> None:
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="recall not met (README, bench rocks on the flight profile: 0.64 analytic, 0.50 irregular): the stereo "
-    "calibration's relative yaw error (sensors.lens.stereo_rotation_deg) is a 0.7 px disparity bias at 2048 px, "
-    "rocks 20-30 m away are placed 0.5-0.9 m too far and fail the association gate",
+    reason="irregular rocks short of the bar on the scenario seed (README, bench rocks on the flight profile, "
+    "session 11: recall 0.832, precision 0.847; analytic 0.872 / 0.912; held-out seed 2 meets it): rocks 25-30 m away "
+    "are found 0.66 of the time against 0.85 on the ideal profile, the flight images' far field",
 )
 def test_bench_rocks_meets_the_issue_bar_on_the_flight_profile() -> None:
     """Issue #16: with half the rocks irregular, on the flight profile, recall and precision >= 0.85 and median
