@@ -31,6 +31,12 @@ from nav.rectify import StereoCalibration
 MIN_MATCHES = 100  # matched corners (pooled over pairs) before the fit is made
 HUBER_PX = 0.15  # Huber threshold of the row residuals (about the corner matcher's own noise, 0.04-0.10 px)
 MAX_ROTATION_RAD = 0.01  # a fitted correction beyond 0.57 deg is a mismatch, not a calibration error: refused
+# Row offsets the fit cannot tell from a rotation: the bilinear resampling's sub-pixel phase moves rectified rows by
+# -0.04 to +0.07 px with an exact calibration (README, rectified row disparity). A pair whose calibration error
+# (1 sigma, ``EpipolarCheck.prior_sigma_rad``) moves its rows by less than this is not checked: there the fit would
+# mostly turn that offset into a rotation (256^2 hazcams: 68 px focal length, 0.35 mrad -> 0.024 px; fitted
+# "pitches" of 1.3-1.7 mrad, four sigma of the calibration, on autonav field 1)
+ROW_FLOOR_PX = 0.05
 
 
 @dataclass(frozen=True)
@@ -107,16 +113,23 @@ def refine_calibration(calib: StereoCalibration, correction: np.ndarray) -> Ster
 
 @dataclass
 class EpipolarCheck:
-    """Onboard state of one stereo pair's epipolar check. Until it has a fit, the matched corners of each rectified
+    """Onboard state of one stereo pair's epipolar check. A pair whose calibration error cannot move its rows past
+    ``ROW_FLOOR_PX`` is left alone (:meth:`resolvable`). Until it has a fit, the matched corners of each rectified
     pair it is shown are pooled; once they number ``MIN_MATCHES``, one fit (:func:`fit_row_rotation`: the
     linearisation is exact to well below the matcher's noise for rotations this small) becomes the pair's
     correction for the rest of the run. The rectified frame turns with the cameras, so corners of pairs taken at
     different mast pointings pool."""
 
+    prior_sigma_rad: float | None = None  # the calibration's stated relative-rotation sigma (None: always check)
     correction: np.ndarray | None = None  # right camera's frame (see right_correction); None until fitted
     fit: RowFit | None = None
     _design: list[np.ndarray] = field(default_factory=list)
     _dv: list[np.ndarray] = field(default_factory=list)
+
+    def resolvable(self, rig: StereoRig) -> bool:
+        """Whether the calibration's relative rotation (1 sigma) moves ``rig``'s rectified rows by at least
+        ``ROW_FLOOR_PX``: else a fit would mostly see resampling offsets (see ``ROW_FLOOR_PX``)."""
+        return self.prior_sigma_rad is None or bool(rig.right.fy_px * self.prior_sigma_rad >= ROW_FLOOR_PX)
 
     def calibration(self, calib: StereoCalibration) -> StereoCalibration:
         """``calib`` as the check has corrected it (unchanged before the fit)."""
@@ -125,7 +138,7 @@ class EpipolarCheck:
     def observe(self, calib: StereoCalibration, rig: StereoRig, left_u8: np.ndarray, right_u8: np.ndarray) -> bool:
         """Pool one pair rectified with ``calib`` (uncorrected; ``rig`` its rectified rig) and fit once enough
         corners are in. True when this pair completed the fit."""
-        if self.correction is not None:
+        if self.correction is not None or not self.resolvable(rig):
             return False
         uv_l, uv_r = matched_corners(left_u8, right_u8)
         self._design.append(row_design(uv_r, rig))

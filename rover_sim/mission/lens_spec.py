@@ -46,7 +46,8 @@ stereo_rotation_deg        0.02           calibration error of the right camera 
                                           256^2 navcam) exceeds the issue's 0.3 px bar in 1.4 % of draws
                                           (1500 draws). The onboard epipolar check (``[nav]
                                           epipolar_check``, ``nav.epipolar``) fits the pitch and roll parts
-                                          from the first pairs' rows; the toe-in part stays and biases range
+                                          from the first pairs' rows (where this sigma moves rows by 0.05 px
+                                          or more: not the 256^2 hazcams); the toe-in part stays and biases range
                                           (3.4 % at 25 m for 0.27 mrad with the navcams' 20 cm baseline).
 baseline_mm                0.3            calibration error of the right camera's position relative to the
                                           left, per axis (assumed; 0.15 % of 20 cm).

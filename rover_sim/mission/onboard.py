@@ -111,6 +111,7 @@ class Onboard:
         vo_update: str = "position",
         epipolar_check: bool = True,
         on_event: Callable[[str], None] | None = None,
+        stereo_rotation_sigma_rad: float | None = None,
     ) -> None:
         if vo_update not in ("position", "full_pose"):
             raise ValueError(f"[nav.vo] update = {vo_update!r}: allowed values are 'position' and 'full_pose'")
@@ -130,6 +131,7 @@ class Onboard:
         self._rectified: dict[str, tuple[np.ndarray, StereoImages]] = {}  # camera -> (raw left, rectified pair)
         # per stereo pair: the in-flight epipolar check (nav.epipolar), None when off
         self.epipolar: dict[str, EpipolarCheck] | None = {} if epipolar_check else None
+        self._stereo_rotation_sigma_rad = stereo_rotation_sigma_rad  # the calibration's stated 1 sigma (per axis)
         self._on_event = on_event
 
     @property
@@ -166,7 +168,9 @@ class Onboard:
         hit = self._rectified.get(camera)
         if hit is not None and hit[0] is pair.left_u8:
             return hit[1]
-        check = None if self.epipolar is None else self.epipolar.setdefault(camera, EpipolarCheck())
+        check = None
+        if self.epipolar is not None:
+            check = self.epipolar.setdefault(camera, EpipolarCheck(prior_sigma_rad=self._stereo_rotation_sigma_rad))
         calib = pair.calibration if check is None else check.calibration(pair.calibration)
         rect = rectification(calib)
         left, right = rect.apply(pair.left_u8, pair.right_u8)

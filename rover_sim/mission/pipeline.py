@@ -90,6 +90,7 @@ class Mission:
                 vo_update=nav.vo.update,
                 epipolar_check=nav.epipolar_check,
                 on_event=self.event,
+                stereo_rotation_sigma_rad=math.radians(scenario.sensors.lens.stereo_rotation_deg),
             )
         except BaseException:  # a plugin that does not load, or Ctrl-C: release the renderer's GL context
             self.world.close()

@@ -13,6 +13,7 @@ from nav.camera import PinholeCamera, StereoRig
 from nav.epipolar import (
     MAX_ROTATION_RAD,
     MIN_MATCHES,
+    ROW_FLOOR_PX,
     EpipolarCheck,
     fit_row_rotation,
     matched_corners,
@@ -135,3 +136,25 @@ def test_check_refuses_a_correction_too_large_to_be_a_calibration_error() -> Non
     assert 5.0 / rect.rig.right.fy_px > MAX_ROTATION_RAD
     assert not check.observe(calib, rect.rig, left, _shifted(left, -6.0, 5.0))
     assert check.correction is None
+
+
+def test_check_leaves_pairs_whose_calibration_error_cannot_move_their_rows() -> None:
+    """With the calibration's stated sigma (0.02 deg, the flight profile's), a 256^2 navcam-like rig (310 px focal
+    length: 0.11 px a sigma) is checked and a 124 deg hazcam-like rig (68 px: 0.024 px, under ROW_FLOOR_PX) is not:
+    there a constant 0.1 px resampling offset would be read as a 1.5 mrad pitch, four sigma of the calibration."""
+    sigma = np.radians(0.02)
+    navcam = _pinhole_calibration()
+    hazcam_l = PinholeCamera.from_fov("h_left", 256, 256, 124.0)
+    hazcam = StereoCalibration.from_rig(
+        StereoRig(hazcam_l, replace(hazcam_l, name="h_right", T_rover_cam=_pose([0, 0, 0], [0.1, 0, 0])))
+    )
+    left = _textured(4)
+    right = _shifted(left, -6.0, 0.1)
+    for calib, checked in ((navcam, True), (hazcam, False)):
+        rect = rectification(calib)
+        check = EpipolarCheck(prior_sigma_rad=sigma)
+        assert check.resolvable(rect.rig) is checked
+        assert bool(rect.rig.right.fy_px * sigma >= ROW_FLOOR_PX) is checked
+        assert check.observe(calib, rect.rig, left, right) is checked
+        assert (check.correction is not None) is checked
+    assert EpipolarCheck(prior_sigma_rad=0.0).resolvable(rectification(navcam).rig) is False  # nothing to find
