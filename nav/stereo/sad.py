@@ -22,6 +22,8 @@ from nav.stereo.params import NO_MATCH, TAG, RowWindow
 VOLUME_BUDGET_BYTES = 768 * 2**20
 # Largest window-row sum (window rows x image columns x quantised values) kept exact when converted to float32.
 _EXACT_FLOAT32 = 2**24
+# Row sums below this leave the tag's 8 fractional bits in float32: the fused key (see Engine) is exact.
+FUSED_TAG_LIMIT = 2.0**16
 
 # ----------------------------------------------------------------------------------------------------------------
 # Step 3: SAD search
@@ -52,10 +54,12 @@ class Engine:
     The window sums are exact at any size: they come from integral images (of the stacked bands of several
     disparities, see :meth:`search`), float32 where the whole stack's sum stays below 2^24, else int32 (exact to
     2^31), and the window's row sums (below ``window_px * (W + hw) * max_value``, checked to be < 2^24) are what is
-    converted to float32. The key is the exact window sum (one subtraction) plus the tag (one addition): a fused
-    ``addWeighted(band_hi, 1, band_lo, -1, tag)``, used before, added ``tag`` to ``-band_lo`` first in its SIMD path
-    and so rounded the tag once ``band_lo`` (a row sum up to the column) passed 2^16: about 5 % of the keys of the
-    1024^2 ``bench stereo`` searches carried a neighbouring disparity's index (none at 256^2).
+    converted to float32. The key is the exact window sum plus the tag. The fused
+    ``addWeighted(band_hi, 1, band_lo, -1, tag)`` adds ``tag`` to ``-band_lo`` first in its SIMD path, which rounds
+    the tag once ``band_lo`` (a row sum up to the column) passes 2^16; it is used only on stacks whose row sums all
+    stay below ``FUSED_TAG_LIMIT`` (every stack of a 256^2 search: one call and one pass per run fewer, about a tenth
+    of the pipeline's time there). Other stacks take an exact subtraction, then the tag (the fused call on every
+    stack, used before, gave about 5 % of the keys of the 1024^2 ``bench stereo`` searches a neighbour's index).
     """
 
     def __init__(
@@ -196,6 +200,7 @@ class Engine:
             self.parts.append(self._new_stack())
         buffers = self.parts[part]
         subtract, add, vmin, vmax, f32 = cv2.subtract, cv2.add, cv2.min, cv2.max, cv2.CV_32F
+        add_weighted, fused = cv2.addWeighted, False
         # (views stop at the first disparity with no column left in the image)
         bands_v = list(zip(self.views, buffers.views, bands, strict=False))
         runs_all = [(view, a, b) for view, _, runs in bands_v for a, b in runs]
@@ -206,12 +211,15 @@ class Engine:
             _, tag, _, _, costs, best, second, tmp, best_right, rolling = view
             for a, b in runs:
                 if k == len(offsets):
-                    self._stack_runs(runs_all, k, offsets, buffers)
+                    fused = self._stack_runs(runs_all, k, offsets, buffers)
                 off, n = offsets[k], b - a
                 k += 1
                 key = costs[a:b]  # (positional arguments: OpenCV parses keywords more slowly)
-                subtract(band_hi[off : off + n], band_lo[off : off + n], key, None, f32)  # exact window sums ...
-                add(key, tag, key)  # ... then the tag (a fused addWeighted rounded it once band_lo passed 2^16)
+                if fused:  # exact: every row sum of this stack is below 2^16 (see _stack_runs)
+                    add_weighted(band_hi[off : off + n], 1.0, band_lo[off : off + n], -1.0, tag, key, f32)
+                else:
+                    subtract(band_hi[off : off + n], band_lo[off : off + n], key, None, f32)  # exact window sums ...
+                    add(key, tag, key)  # ... then the tag
                 best_c, second_c = best[a:b], second[a:b]
                 vmin(second_c, vmax(best_c, key, tmp[a:b]), second_c)
                 vmin(best_c, key, best_c)
@@ -246,7 +254,7 @@ class Engine:
             views,
         )
 
-    def _stack_runs(self, runs: list[tuple], k0: int, offsets: list[int], buffers: _Stack) -> None:
+    def _stack_runs(self, runs: list[tuple], k0: int, offsets: list[int], buffers: _Stack) -> bool:
         """|L - R| of runs ``k0, k0 + 1, ...`` (as many as the stack holds), each with hw rows more above and below,
         stacked; then one integral image and one subtraction give the sums over ``window_px`` rows of all of them
         (row ``offsets[k] + j`` of ``band``: run k's row a + j). A column sum never mixes two runs. The columns left
@@ -272,7 +280,10 @@ class Engine:
             offsets.append(row)
             row += n_rows
         integ = cv2.integral(stack[:row], buffers.integral[: row + 1], self.sdepth)
-        cv2.subtract(integ[win:], integ[: row + 1 - win], buffers.band[: row + 1 - win])
+        band = cv2.subtract(integ[win:], integ[: row + 1 - win], buffers.band[: row + 1 - win])
+        # The largest row sum (the last column: sums grow along a row) below 2^16: ``-band_lo + tag``, which the
+        # fused addWeighted forms first in its SIMD path, then keeps the tag's 8 fractional bits exactly.
+        return self.sdepth == cv2.CV_32F and float(band[:, -1].max()) < FUSED_TAG_LIMIT
 
     def winners(self, v0: int = 0, v1: int | None = None, none_index: float = -1.0) -> tuple[np.ndarray, np.ndarray]:
         """Winning index of every left pixel (float32; 0 where none, see found) and every right pixel

@@ -246,3 +246,27 @@ def test_threads_do_not_change_the_disparity(
     finally:
         cv2.setNumThreads(n_threads)
     assert np.isfinite(alone).mean() > 0.5
+
+
+def test_fused_key_is_exact_and_taken_where_row_sums_allow(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The fused key (window sum and tag in one addWeighted) gives bit for bit the keys of the two-step key, and a
+    256^2 search takes it on every stack (its row sums stay below ``FUSED_TAG_LIMIT``)."""
+    scene = synth_pair(seed=3)
+    taken: list[bool] = []
+    stack_runs = sad_mod.Engine._stack_runs
+
+    def spy(self, *args):  # noqa: ANN001, ANN202
+        taken.append(stack_runs(self, *args))
+        return taken[-1]
+
+    monkeypatch.setattr(sad_mod.Engine, "_stack_runs", spy)
+    monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
+    fused = compute_disparity(scene.left, scene.right)
+    assert taken and all(taken)
+    monkeypatch.setattr(sad_mod, "FUSED_TAG_LIMIT", 0.0)
+    monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
+    taken.clear()
+    two_step = compute_disparity(scene.left, scene.right)
+    assert taken and not any(taken)
+    np.testing.assert_array_equal(fused, two_step)
+    assert np.isfinite(fused).mean() > 0.5
