@@ -15,6 +15,14 @@ Model (small right-camera rotation ``e`` in the rectified frame; ``x, y`` normal
 right pixel lands at ``v_r - v_l = f * (-e_x (1 + y^2) + e_z x + e_y x y)`` (the last term, toe-in's, is below a
 hundredth of a pixel at 256^2 and not fitted). :func:`fit_row_rotation` solves for ``(e_x, e_z)`` by iteratively
 reweighted least squares (Huber); :func:`refine_calibration` turns the calibrated right model by ``-e``.
+
+Optionally (``fit_scale``) the fit also takes the right camera's focal length relative to the left's: a relative
+focal error ``s`` scales the rectified right image about its centre, ``v_r - v_l = f s y`` in rows and
+``f s x`` in columns. Rows show it, and correcting it removes the column part, which no row test sees otherwise:
+it is a disparity error growing from the image centre to ``f s`` at the edge (at 2048 px and a 0.11 % relative
+error, 1.1 px at the edges: a 4 % range error at 20 m, phantom rocks in the rock survey's far field). Dang et al.
+track the focal lengths beside the rotation for the same reason. Small images leave it alone: at 256^2 a 0.07 %
+relative error moves rows by 0.09 px at the top and bottom edges, near the resampling's own row offsets.
 """
 
 from __future__ import annotations
@@ -31,6 +39,7 @@ from nav.rectify import StereoCalibration
 MIN_MATCHES = 100  # matched corners (pooled over pairs) before the fit is made
 HUBER_PX = 0.15  # Huber threshold of the row residuals (about the corner matcher's own noise, 0.04-0.10 px)
 MAX_ROTATION_RAD = 0.01  # a fitted correction beyond 0.57 deg is a mismatch, not a calibration error: refused
+MAX_SCALE = 0.01  # ... and so is a relative focal length off by more than 1 %
 # Row offsets the fit cannot tell from a rotation: the bilinear resampling's sub-pixel phase moves rectified rows by
 # -0.04 to +0.07 px with an exact calibration (README, rectified row disparity). A pair whose calibration error
 # (1 sigma, ``EpipolarCheck.prior_sigma_rad``) moves its rows by less than this is not checked: there the fit would
@@ -42,12 +51,14 @@ ROW_FLOOR_PX = 0.05
 @dataclass(frozen=True)
 class RowFit:
     """A fitted relative rotation (rad, rectified frame: x along the baseline, z the optical axis; ``[1]`` is 0)
-    and the row disparities (px, median of |v_r - v_l|) of the fitting matches before and after it."""
+    and the row disparities (px, median of |v_r - v_l|) of the fitting matches before and after it.
+    ``scale``: the rectified right image's magnification relative to the left's, minus one (0 unless fitted)."""
 
     rotation_rad: np.ndarray
     n_matches: int
     before_px: float
     after_px: float
+    scale: float = 0.0
 
 
 def matched_corners(
@@ -65,12 +76,14 @@ def matched_corners(
     return pts[ok, 0].astype(float), fwd[ok, 0].astype(float)
 
 
-def row_design(uv_right: np.ndarray, rig: StereoRig) -> np.ndarray:
-    """(N, 2) derivatives of the right row (px) with respect to the rotation's x and z components (rad)."""
+def row_design(uv_right: np.ndarray, rig: StereoRig, scale: bool = False) -> np.ndarray:
+    """(N, 2) derivatives of the right row (px) with respect to the rotation's x and z components (rad); with
+    ``scale``, (N, 3): and with respect to the right image's relative magnification."""
     cam = rig.right
     x = (uv_right[:, 0] - cam.cx_px) / cam.fx_px
     y = (uv_right[:, 1] - cam.cy_px) / cam.fy_px
-    return cam.fy_px * np.stack([-(1.0 + y * y), x], axis=1)
+    cols = [-(1.0 + y * y), x, y] if scale else [-(1.0 + y * y), x]
+    return cam.fy_px * np.stack(cols, axis=1)
 
 
 def fit_row_rotation(uv_left: np.ndarray, uv_right: np.ndarray, rig: StereoRig, iterations: int = 8) -> RowFit:
@@ -85,14 +98,14 @@ def fit_rows(A: np.ndarray, dv: np.ndarray, iterations: int = 8) -> RowFit:
     if len(dv) < MIN_MATCHES:
         raise ValueError(f"{len(dv)} matched corners: the row fit needs at least {MIN_MATCHES}")
     w = np.ones(len(dv))
-    p = np.zeros(2)
+    p = np.zeros(A.shape[1])
     for _ in range(iterations):
         sw = np.sqrt(w)
         p = np.linalg.lstsq(A * sw[:, None], dv * sw, rcond=None)[0]
         r = np.abs(dv - A @ p)
         w = np.where(r <= HUBER_PX, 1.0, HUBER_PX / np.maximum(r, 1e-12))
     return RowFit(np.array([p[0], 0.0, p[1]]), len(dv), float(np.median(np.abs(dv))),
-                  float(np.median(np.abs(dv - A @ p))))  # fmt: skip
+                  float(np.median(np.abs(dv - A @ p))), float(p[2]) if len(p) > 2 else 0.0)  # fmt: skip
 
 
 def right_correction(calib: StereoCalibration, rig: StereoRig, rotation_rad: np.ndarray) -> np.ndarray:
@@ -104,11 +117,16 @@ def right_correction(calib: StereoCalibration, rig: StereoRig, rotation_rad: np.
     return R_cal.T @ undo @ R_cal
 
 
-def refine_calibration(calib: StereoCalibration, correction: np.ndarray) -> StereoCalibration:
-    """``calib`` with the right model turned by ``correction`` (its own frame, :func:`right_correction`)."""
+def refine_calibration(calib: StereoCalibration, correction: np.ndarray, scale: float = 0.0) -> StereoCalibration:
+    """``calib`` with the right model turned by ``correction`` (its own frame, :func:`right_correction`) and, for a
+    fitted relative magnification ``scale`` (:class:`RowFit`), its focal lengths times ``1 + scale``: a right
+    focal length calibrated too long by a factor ``1 + e`` shrinks the rectified right image by ``1 / (1 + e)``."""
     T = np.asarray(calib.right.T_rover_cam, float).copy()
     T[:3, :3] = T[:3, :3] @ correction
-    return replace(calib, right=replace(calib.right, T_rover_cam=T))
+    right = replace(calib.right, T_rover_cam=T)
+    if scale:
+        right = replace(right, fx_px=right.fx_px * (1.0 + scale), fy_px=right.fy_px * (1.0 + scale))
+    return replace(calib, right=right)
 
 
 @dataclass
@@ -121,7 +139,9 @@ class EpipolarCheck:
     different mast pointings pool."""
 
     prior_sigma_rad: float | None = None  # the calibration's stated relative-rotation sigma (None: always check)
+    fit_scale: bool = False  # also fit the right camera's relative focal length (see the module docstring)
     correction: np.ndarray | None = None  # right camera's frame (see right_correction); None until fitted
+    scale: float = 0.0  # fitted relative magnification of the right image (fit_scale; 0 until fitted)
     fit: RowFit | None = None
     _design: list[np.ndarray] = field(default_factory=list)
     _dv: list[np.ndarray] = field(default_factory=list)
@@ -133,7 +153,7 @@ class EpipolarCheck:
 
     def calibration(self, calib: StereoCalibration) -> StereoCalibration:
         """``calib`` as the check has corrected it (unchanged before the fit)."""
-        return calib if self.correction is None else refine_calibration(calib, self.correction)
+        return calib if self.correction is None else refine_calibration(calib, self.correction, self.scale)
 
     def observe(self, calib: StereoCalibration, rig: StereoRig, left_u8: np.ndarray, right_u8: np.ndarray) -> bool:
         """Pool one pair rectified with ``calib`` (uncorrected; ``rig`` its rectified rig) and fit once enough
@@ -141,7 +161,7 @@ class EpipolarCheck:
         if self.correction is not None or not self.resolvable(rig):
             return False
         uv_l, uv_r = matched_corners(left_u8, right_u8)
-        self._design.append(row_design(uv_r, rig))
+        self._design.append(row_design(uv_r, rig, self.fit_scale))
         self._dv.append(uv_r[:, 1] - uv_l[:, 1])
         n = sum(len(d) for d in self._dv)
         if n < MIN_MATCHES:
@@ -149,8 +169,9 @@ class EpipolarCheck:
         fit = fit_rows(np.concatenate(self._design), np.concatenate(self._dv))
         self._design.clear()
         self._dv.clear()
-        if np.linalg.norm(fit.rotation_rad) > MAX_ROTATION_RAD:  # mismatched corners: pool afresh
+        if np.linalg.norm(fit.rotation_rad) > MAX_ROTATION_RAD or abs(fit.scale) > MAX_SCALE:  # mismatches: anew
             return False
         self.fit = fit
         self.correction = right_correction(calib, rig, fit.rotation_rad)
+        self.scale = fit.scale
         return True

@@ -31,7 +31,7 @@ from nav.dead_reckoning import DeadReckoner
 from nav.epipolar import EpipolarCheck
 from nav.geometry import se3_inv
 from nav.protocols import Planner, StereoMatcher, VisualOdometer
-from nav.rectify import rectification
+from nav.rectify import StereoCalibration, rectification
 from nav.stereo import RangeImage, range_image_with
 from nav.trajectory import Pose
 from nav.types import ImuSample, RoverGeometry
@@ -151,7 +151,7 @@ class Onboard:
         return self.estimator.pose
 
     # ------------------------------------------------------------------ rectification
-    def rectified(self, obs: Observation, camera: str) -> StereoImages:
+    def rectified(self, obs: Observation, camera: str, refine: EpipolarCheck | None = None) -> StereoImages:
         """``camera``'s pair of ``obs``, rectified with its calibrated models (unchanged if already rectified).
 
         Stereo and VO then triangulate with the rectified pinhole rig, which is triangulating through the models:
@@ -161,32 +161,54 @@ class Onboard:
         and roll from their row disparities (:mod:`nav.epipolar`; the toe-in, which biases range, is not
         observable this way and stays); from the pair that completes the fit on, every pair is rectified with the
         corrected calibration. The tables are cached per calibration and the last rectified pair per camera is
-        reused."""
+        reused.
+
+        ``refine``: a second check applied on top of the camera's own, with its own state (the rock survey's
+        full-resolution panoramas fit the relative focal length there, :class:`nav.epipolar.EpipolarCheck`
+        ``fit_scale``); such pairs bypass the per-camera cache."""
         pair = require_observation(obs, "Onboard.rectified").pair(camera)
         if pair.calibration is None:
             return pair
         hit = self._rectified.get(camera)
-        if hit is not None and hit[0] is pair.left_u8:
+        if refine is None and hit is not None and hit[0] is pair.left_u8:
             return hit[1]
-        check = None
-        if self.epipolar is not None:
-            check = self.epipolar.setdefault(camera, EpipolarCheck(prior_sigma_rad=self._stereo_rotation_sigma_rad))
-        calib = pair.calibration if check is None else check.calibration(pair.calibration)
+        calib = pair.calibration
+        for check in self._checks(camera, refine):
+            calib = self._checked(camera, check, calib, pair)
         rect = rectification(calib)
-        left, right = rect.apply(pair.left_u8, pair.right_u8)
-        if check is not None and check.correction is None and check.observe(calib, rect.rig, left, right):
-            rect = rectification(check.calibration(pair.calibration))
+        out = StereoImages(camera, pair.t_s, *rect.apply(pair.left_u8, pair.right_u8), rect.rig)
+        if refine is None:
+            self._rectified[camera] = (pair.left_u8, out)
+        return out
+
+    def _checks(self, camera: str, refine: EpipolarCheck | None) -> list[EpipolarCheck]:
+        """The epipolar checks ``camera``'s pairs go through, in order (the camera's own, then ``refine``)."""
+        checks = []
+        if self.epipolar is not None:
+            checks.append(
+                self.epipolar.setdefault(camera, EpipolarCheck(prior_sigma_rad=self._stereo_rotation_sigma_rad))
+            )
+        if refine is not None:
+            checks.append(refine)
+        return checks
+
+    def _checked(
+        self, camera: str, check: EpipolarCheck, calib: StereoCalibration, pair: StereoImages
+    ) -> StereoCalibration:
+        """``calib`` as ``check`` corrects it; a check without a fit yet that can resolve this pair is shown it
+        rectified with ``calib`` (and may complete its fit with it)."""
+        rect = rectification(calib) if check.correction is None else None
+        if rect is not None and check.resolvable(rect.rig):
             left, right = rect.apply(pair.left_u8, pair.right_u8)
-            fit = check.fit
-            if self._on_event is not None and fit is not None:
+            if check.observe(calib, rect.rig, left, right) and self._on_event is not None and check.fit is not None:
+                fit = check.fit
+                scale = f", focal length {1e2 * fit.scale:+.3f} %" if check.fit_scale else ""
                 self._on_event(
                     f"epipolar check ({camera}): right camera pitch {1e3 * fit.rotation_rad[0]:+.3f} mrad, roll "
-                    f"{1e3 * fit.rotation_rad[2]:+.3f} mrad from {fit.n_matches} corners; row disparity "
+                    f"{1e3 * fit.rotation_rad[2]:+.3f} mrad{scale} from {fit.n_matches} corners; row disparity "
                     f"{fit.before_px:.3f} -> {fit.after_px:.3f} px (median)"
                 )
-        out = StereoImages(camera, pair.t_s, left, right, rect.rig)
-        self._rectified[camera] = (pair.left_u8, out)
-        return out
+        return check.calibration(calib)
 
     # ------------------------------------------------------------------ visual odometry
     def vo_step(self, obs: Observation, camera: str) -> VoStep:
