@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nav.epipolar import EpipolarCheck
 from nav.rocks import ROCK_SHAPES
 from rover_sim.mission import acceptance
 from rover_sim.mission.scenario import load_scenario
@@ -87,6 +88,7 @@ def bench_rocks(
     with RockSiteSurvey(sc, config, progress=progress) as sv:
         sites = sv.run()
         terrain = sv.terrain
+        focal = _focal_check(sv.focal_check)
     wall_survey = time.perf_counter() - t0
 
     # ground processing: the panorama pair's range bias, fitted on the rocks matched between sites
@@ -127,6 +129,7 @@ def bench_rocks(
         "model_type_match_frac_well_observed": _well_observed_frac(total),
         # extras
         "range_bias": _range_bias(range_cal, raw_total, raw_sites, terrain),
+        "focal_check": focal,
         "profile": sc.sensors.profile,
         "irregular_fraction": sc.terrain.rocks.irregular_fraction,
         "by_rock_class": _by_class(sites, terrain),
@@ -187,6 +190,22 @@ def _sum(evals: list[ExtractionEval]) -> ExtractionEval:
     for e in evals[1:]:
         total = total + e
     return total
+
+
+def _focal_check(check: EpipolarCheck | None) -> dict | None:
+    """The panoramas' full-resolution epipolar check (``SurveyConfig.focal_check``): the right navcam's fitted
+    relative focal length, pitch and roll, and the row disparities of its corners before and after (None: not run,
+    the ideal profile)."""
+    if check is None or check.fit is None:
+        return None
+    fit = check.fit
+    return {
+        "focal_length_pct": 100.0 * fit.scale,
+        "pitch_mrad": 1e3 * float(fit.rotation_rad[0]),
+        "roll_mrad": 1e3 * float(fit.rotation_rad[2]),
+        "corners": fit.n_matches,
+        "row_disparity_px": {"before": fit.before_px, "after": fit.after_px},
+    }
 
 
 def _range_bias(cal: RangeCalibration, raw_total: ExtractionEval, raw_sites: list, terrain: Terrain) -> dict:
@@ -336,6 +355,12 @@ def _print(result: dict, per_site: list[ExtractionEval], pairs: list[MatchEval])
               f"{rb['tie_points']} tie points in {rb['site_pairs']} site pairs, cost drop {rb['cost_drop']:.1f}: "
               f"{'applied' if rb['applied'] else 'not significant, not applied'}; without it recall "
               f"{raw['recall']:.3f}, precision {raw['precision']:.3f}")  # fmt: skip
+    fc = result["focal_check"]
+    if fc is not None:
+        rows = fc["row_disparity_px"]
+        print(f"panorama epipolar check: right navcam focal length {fc['focal_length_pct']:+.3f} %, pitch "
+              f"{fc['pitch_mrad']:+.3f} mrad, roll {fc['roll_mrad']:+.3f} mrad from {fc['corners']} corners; row "
+              f"disparity {rows['before']:.3f} -> {rows['after']:.3f} px")  # fmt: skip
     print()
     print(f"| rock class (irregular fraction {result['irregular_fraction']:g}) | recall | precision | "
           "median model RMS |")  # fmt: skip

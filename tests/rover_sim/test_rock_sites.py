@@ -257,6 +257,7 @@ def test_bench_rocks_meets_the_issue_bar_on_the_flight_profile() -> None:
 
     result = bench_rocks(profile="flight", irregular_fraction=0.5)
     assert result["profile"] == "flight"
+    assert abs(result["focal_check"]["focal_length_pct"]) < 0.5  # the panoramas' focal-length check ran
     for name, c in result["by_rock_class"].items():
         assert c["recall"] >= 0.85 and c["precision"] >= 0.85, name
         assert c["median_rms_m"] <= 0.04, name
