@@ -31,7 +31,7 @@ from nav.dead_reckoning import DeadReckoner
 from nav.epipolar import EpipolarCheck
 from nav.geometry import se3_inv
 from nav.protocols import Planner, StereoMatcher, VisualOdometer
-from nav.rectify import StereoCalibration, rectification
+from nav.rectify import Rectification, StereoCalibration, rectification
 from nav.stereo import RangeImage, range_image_with
 from nav.trajectory import Pose
 from nav.types import ImuSample, RoverGeometry
@@ -172,10 +172,10 @@ class Onboard:
         hit = self._rectified.get(camera)
         if refine is None and hit is not None and hit[0] is pair.left_u8:
             return hit[1]
-        calib = pair.calibration
+        calib, rect = pair.calibration, None
         for check in self._checks(camera, refine):
-            calib = self._checked(camera, check, calib, pair)
-        rect = rectification(calib)
+            calib, rect = self._checked(camera, check, calib, pair, rect)
+        rect = rect if rect is not None else rectification(calib)
         out = StereoImages(camera, pair.t_s, *rect.apply(pair.left_u8, pair.right_u8), rect.rig)
         if refine is None:
             self._rectified[camera] = (pair.left_u8, out)
@@ -193,22 +193,34 @@ class Onboard:
         return checks
 
     def _checked(
-        self, camera: str, check: EpipolarCheck, calib: StereoCalibration, pair: StereoImages
-    ) -> StereoCalibration:
-        """``calib`` as ``check`` corrects it; a check without a fit yet that can resolve this pair is shown it
-        rectified with ``calib`` (and may complete its fit with it)."""
-        rect = rectification(calib) if check.correction is None else None
-        if rect is not None and check.resolvable(rect.rig):
-            left, right = rect.apply(pair.left_u8, pair.right_u8)
-            if check.observe(calib, rect.rig, left, right) and self._on_event is not None and check.fit is not None:
-                fit = check.fit
-                scale = f", focal length {1e2 * fit.scale:+.3f} %" if check.fit_scale else ""
-                self._on_event(
-                    f"epipolar check ({camera}): right camera pitch {1e3 * fit.rotation_rad[0]:+.3f} mrad, roll "
-                    f"{1e3 * fit.rotation_rad[2]:+.3f} mrad{scale} from {fit.n_matches} corners; row disparity "
-                    f"{fit.before_px:.3f} -> {fit.after_px:.3f} px (median)"
-                )
-        return check.calibration(calib)
+        self,
+        camera: str,
+        check: EpipolarCheck,
+        calib: StereoCalibration,
+        pair: StereoImages,
+        rect: Rectification | None,
+    ) -> tuple[StereoCalibration, Rectification | None]:
+        """``calib`` as ``check`` corrects it, and ``calib``'s rectification ``rect`` (None: not built yet) if the
+        check left ``calib`` as it was. A check without a fit yet that can resolve this pair is shown it rectified
+        with ``calib`` (and may complete its fit with it)."""
+        if check.correction is None:
+            rect = rect if rect is not None else rectification(calib)
+            if check.resolvable(rect.rig) and check.observe(calib, rect.rig, *rect.apply(pair.left_u8, pair.right_u8)):
+                self._report_fit(camera, check)
+        corrected = check.calibration(calib)
+        return corrected, (rect if corrected is calib else None)
+
+    def _report_fit(self, camera: str, check: EpipolarCheck) -> None:
+        """The events-log line of a check's completed fit."""
+        fit = check.fit
+        if self._on_event is None or fit is None:
+            return
+        scale = f", focal length {1e2 * fit.scale:+.3f} %" if check.fit_scale else ""
+        self._on_event(
+            f"epipolar check ({camera}): right camera pitch {1e3 * fit.rotation_rad[0]:+.3f} mrad, roll "
+            f"{1e3 * fit.rotation_rad[2]:+.3f} mrad{scale} from {fit.n_matches} corners; row disparity "
+            f"{fit.before_px:.3f} -> {fit.after_px:.3f} px (median)"
+        )
 
     # ------------------------------------------------------------------ visual odometry
     def vo_step(self, obs: Observation, camera: str) -> VoStep:
