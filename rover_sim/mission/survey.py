@@ -23,10 +23,12 @@ fitted from the rocks matched between sites and the rocks moved back along their
 (:mod:`nav.rocks.range_bias`: a toe-in calibration error adds a constant to inverse range). The chain of sites is then
 adjusted by :class:`nav.rocks.SiteChain`: matches between every two sites within 26 m
 (estimated) give site-to-site transforms, fused with the odometry legs, each weighted by its own covariance; a leg's
-is the sum of the covariances VO reports for its steps (the survey wraps the mission's VO step to collect them) plus
-the gyro's heading drift over the leg's duration. Ground truth (the terrain's rock list, the simulator's rover pose)
-is used only by the ``evaluate_*`` functions below: to map a site's estimated frame onto the true world (truth pose
-composed with the inverse onboard pose) and to associate extracted rocks with the generated ones.
+is the sum of the covariances VO reports for its steps (the survey wraps the mission's VO step to collect them), plus
+on a calibrated rig VO's systematic part (``VO_SYSTEMATIC_SIGMA_FRAC`` of the leg: the calibration biases every step
+alike), plus the gyro's heading drift over the leg's duration. Ground truth (the terrain's rock list, the
+simulator's rover pose) is used only by the ``evaluate_*`` functions below: to map a site's estimated frame onto the
+true world (truth pose composed with the inverse onboard pose) and to associate extracted rocks with the generated
+ones.
 
 Sensor profile: with ``[sensors.lens]`` on (flight) the panorama pairs are raw images through the run's true lenses
 (:mod:`rover_sim.render.lens`) and the CCD image formation (:mod:`rover_sim.render.imaging`), rectified on board
@@ -82,6 +84,13 @@ MAST_SETTLE_S = 1.5  # mast servo settling after a pan step (it tracks to ~1e-5 
 REST_BEFORE_PANORAMA_S = 3.0  # the rover stands this long after a drive: the suspension settles and the dead
 # reckoner re-levels roll and pitch from the accelerometers (at rest) before the panorama is mapped through its pose
 VO_FAILED_STEP_SIGMA_FRAC = 0.1  # a step VO did not correct is the wheel odometry's: this fraction of its length
+# VO's systematic error on a calibrated (flight) rig, per axis, as a fraction of the leg: the step covariance VO
+# reports is its fit's (feature noise), but the calibration's errors (toe-in, range scale) bias every step of a leg
+# the same way, so they add up with the distance, not with its square root. 1 % is MER VO's accuracy figure
+# (REFERENCE section 3.4: MSSTB under 1 %), not fitted here. Without it the summed step covariances were 20-40 times
+# too small in sigma: 1-2 mm against 3-7 cm errors on the survey's 13-16 m legs (chi-square 350-3400, 3 dof;
+# README, rock survey, session 13)
+VO_SYSTEMATIC_SIGMA_FRAC = 0.01
 
 
 @dataclass(frozen=True)
@@ -199,6 +208,12 @@ class RockSiteSurvey:
             d = float(np.linalg.norm(np.asarray(step.predicted_motion_rover)[:3, 3]))
             self._leg_cov += (VO_FAILED_STEP_SIGMA_FRAC * d) ** 2 * np.eye(3)
 
+    def _vo_systematic_cov_m2(self, driven_m: float) -> np.ndarray:
+        """VO's systematic error over a leg of ``driven_m`` (``VO_SYSTEMATIC_SIGMA_FRAC`` per axis) on a calibrated
+        rig; none on the ideal profile's exact cameras (whose VO errors are its fit's)."""
+        frac = VO_SYSTEMATIC_SIGMA_FRAC if self.calibration is not None else 0.0
+        return (frac * driven_m) ** 2 * np.eye(3)
+
     @property
     def terrain(self) -> Terrain:
         return self.mission.terrain
@@ -266,15 +281,16 @@ class RockSiteSurvey:
         cloud = voxel_downsample(cloud[horiz <= cfg.max_range_m], cfg.voxel_m)
         rocks = extract_rocks(cloud, cfg.rocks, sensor_xyz=sensor)
         timings["extract"] = time.perf_counter() - t0
+        driven_m = m.onboard.estimator.distance_m - self._last_distance_m
         site = SiteSurvey(
             index=len(self.sites),
             t_s=sim.time_s,
             T_world_rover_true=T_true,
             T_world_rover_dr=T_dr,
             T_world_rover_onboard=T_onboard,
-            driven_m=m.onboard.estimator.distance_m - self._last_distance_m,
+            driven_m=driven_m,
             leg_s=sim.time_s - self._last_t_s,
-            odometry_cov_m2=self._leg_cov.copy(),
+            odometry_cov_m2=self._leg_cov + self._vo_systematic_cov_m2(driven_m),
             sensor_xyz_m=sensor,
             rocks=rocks,
             n_points=len(cloud),

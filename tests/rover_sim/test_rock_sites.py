@@ -12,6 +12,7 @@ from nav.rocks import ExtractedRock, LocalPlane, PanoramaStereoParams, Pose4, Ro
 from nav.trajectory import Pose
 from rover_sim.mission.scenario import GotoCmd, load_scenario, scenario_from_dict
 from rover_sim.mission.survey import (
+    VO_SYSTEMATIC_SIGMA_FRAC,
     RockSiteSurvey,
     SiteSurvey,
     SurveyConfig,
@@ -76,6 +77,16 @@ def eval_terrain():
         size_m=(40.0, 30.0), cell_size_m=0.1, rocks=RockSpec(cover_fraction=0.0), explicit_rocks=rocks
     )
     return synthesize(recipe, seed=0)
+
+
+def test_leg_covariance_carries_vo_systematic_error_on_a_calibrated_rig() -> None:
+    """VO's step covariances are its fit's; on a calibrated (flight) rig the survey adds the calibration's systematic
+    part, growing with the leg (not its square root): 1 % of a 15 m leg is 15 cm per axis. Exact cameras: none."""
+    from types import SimpleNamespace
+
+    flight = RockSiteSurvey._vo_systematic_cov_m2(SimpleNamespace(calibration=object()), 15.0)
+    np.testing.assert_allclose(np.sqrt(np.diag(flight)), VO_SYSTEMATIC_SIGMA_FRAC * 15.0)
+    assert not RockSiteSurvey._vo_systematic_cov_m2(SimpleNamespace(calibration=None), 15.0).any()
 
 
 def test_evaluate_extraction_counts_against_the_rock_list(eval_terrain) -> None:
