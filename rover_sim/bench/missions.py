@@ -87,6 +87,7 @@ def _vo_case(scenario: str | Scenario, out_dir: Path, overrides: list[str], prof
         "vo_update": sc.nav.vo.update,
         "kitti_segment_error_pct": m.kitti_segment_error_pct,
         "rms_position_error_m": m.rms_position_error_m,
+        "vo_covariance_nees": m.extra.get("vo_covariance_nees"),
         "distance_m": m.distance_m,
         "dr_error_pct": m.dr_error_pct,
         "vo_error_pct": m.vo_error_pct,
@@ -172,8 +173,32 @@ def bench_vo(
                 f"{r['false_positives']} | {_fmt(r['vo_step_ms_median'])} | {accept} | "
                 f"{'yes' if r['passed'] else 'NO'} |"
             )
+    _print_nees(runs, chosen)
     write_json(json_path, results)
     return results
+
+
+def _print_nees(runs: list[tuple[str, dict]], chosen: dict) -> None:
+    """VO's covariance consistency per case (NEES medians: per accepted step and over 1 m and 5 m of consecutive
+    steps; a consistent covariance gives about 2.37 everywhere)."""
+    print(
+        "\n| VO | profile | VO update | case | NEES per step | NEES over 1 m | NEES over 5 m | "
+        "(consistent: median 2.37, 3 dof) |"
+    )
+    print("|---|---|---|---|---:|---:|---:|---|")
+    for label, per in runs:
+        for case, r in per.items():
+            if case not in chosen:
+                continue
+            n = r.get("vo_covariance_nees")
+            if n is None:
+                print(f"| {label} | {r['profile']} | {r['vo_update']} | {case} | - | - | - | no covariance |")
+                continue
+            seg = n["segment_median"]
+            print(
+                f"| {label} | {r['profile']} | {r['vo_update']} | {case} | {_fmt(n['step_median'])} | "
+                f"{_fmt(seg.get('1m'))} | {_fmt(seg.get('5m'))} | |"
+            )
 
 
 COMPARISON_KEYS = ("plugins", "ideal", "full_pose")  # bench vo top-level keys that are not flight cases

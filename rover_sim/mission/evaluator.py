@@ -40,6 +40,9 @@ MIN_SLIP_TRAVEL_M = 0.05  # steps commanding less travel than this (turns in pla
 MIN_DISTANCE_FOR_PCT_M = 0.1
 # KITTI-style segment lengths of travelled distance (issue #16); a length is scored only when the drive is longer
 SEGMENT_LENGTHS_M = (1.0, 5.0, 10.0)
+# VO covariance consistency: segments of this much true travel (m) over consecutive accepted steps
+NEES_SEGMENT_LENGTHS_M = (1.0, 5.0)
+CHI2_3DOF_MEDIAN = 2.366  # median of a chi-square with 3 degrees of freedom: a consistent covariance's NEES
 
 
 @dataclass
@@ -121,6 +124,59 @@ def segment_errors_pct(
     return {f"{e.length_m:g}m": round(e.translation_error_pct, 3) for e in errs if e.n_segments}
 
 
+@dataclass(frozen=True)
+class VoStepError:
+    """One accepted VO step's translation error and the translation covariance VO reported, both in the world frame
+    (rotated by the true attitude at the previous pair); ``true_step_m`` is the true translation's length."""
+
+    true_step_m: float
+    error_m: np.ndarray  # (3,)
+    cov_m2: np.ndarray  # (3, 3)
+
+
+def nees(error: np.ndarray, cov: np.ndarray) -> float:
+    """Normalised estimation error squared ``e^T C^-1 e`` (NaN if ``cov`` is singular or not finite)."""
+    if not np.all(np.isfinite(cov)):
+        return math.nan
+    try:
+        return float(error @ np.linalg.solve(cov, error))
+    except np.linalg.LinAlgError:
+        return math.nan
+
+
+def vo_covariance_nees(
+    steps: Sequence[VoStepError | None], lengths_m: tuple[float, ...] = NEES_SEGMENT_LENGTHS_M
+) -> dict | None:
+    """How well VO's reported covariances describe its errors (Bar-Shalom's NEES): the median over accepted steps of
+    ``e^T C^-1 e`` (3 dof: about ``CHI2_3DOF_MEDIAN`` if consistent, larger if optimistic), and the same over
+    non-overlapping runs of consecutive accepted steps covering ``L`` m of true travel, errors and covariances summed
+    as if the steps were independent. A step error common to every step (a calibration bias) leaves the per-step
+    figure near its own but grows the segment figure with ``L``; a ``None`` (a refused step) ends a run. None when
+    no step has a finite covariance."""
+    per_step = [nees(s.error_m, s.cov_m2) for s in steps if s is not None]
+    per_step = [x for x in per_step if math.isfinite(x)]
+    if not per_step:
+        return None
+    segments: dict[str, float | None] = {}
+    for length in lengths_m:
+        values, err, cov, travel = [], np.zeros(3), np.zeros((3, 3)), 0.0
+        for s in steps:
+            if s is None or not np.all(np.isfinite(s.cov_m2)):
+                err, cov, travel = np.zeros(3), np.zeros((3, 3)), 0.0
+                continue
+            err, cov, travel = err + s.error_m, cov + s.cov_m2, travel + s.true_step_m
+            if travel >= length:
+                values.append(nees(err, cov))
+                err, cov, travel = np.zeros(3), np.zeros((3, 3)), 0.0
+        values = [v for v in values if math.isfinite(v)]
+        segments[f"{length:g}m"] = round(float(np.median(values)), 2) if values else None
+    return {
+        "step_median": round(float(np.median(per_step)), 2),
+        "segment_median": segments,
+        "consistent_median": CHI2_3DOF_MEDIAN,
+    }
+
+
 def rms_position_error_m(estimate: Trajectory, truth: Trajectory) -> float:
     """Root mean square of ``|p_est - p_true|`` over every record (the sawtooth between VO updates included)."""
     d = np.linalg.norm(estimate.positions_xyz - truth.positions_xyz, axis=1)
@@ -179,6 +235,7 @@ class Evaluator:
         self.onboard_poses = PoseSeries()
         self.commanded_m: list[float] = []  # wheel odometry's distance at each recorded pose
         self.vo_steps: list[VoStepRecord] = []
+        self.vo_step_errors: list[VoStepError | None] = []  # accepted steps' errors and covariances; None: refused
         self.body_collision_ticks = 0
         self.tall_rock_contact_ticks = 0
         self.keep_out_info: dict | None = None
@@ -205,8 +262,10 @@ class Evaluator:
         ms: float,
         reason: str = "",
         no_texture: bool = False,
+        covariance: np.ndarray | None = None,
     ) -> VoStepRecord | None:
-        """Score one VO step against the true motion since the previous pair (None for the first pair)."""
+        """Score one VO step against the true motion since the previous pair (None for the first pair);
+        ``covariance``: the 6x6 VO reported (translation first, previous rover frame), for its consistency."""
         T_truth = truth.as_matrix()
         rec = None
         if self._last_frame_truth is not None and status != "first_frame":
@@ -214,9 +273,16 @@ class Evaluator:
             true_good = float(true_motion[0, 3])
             vo_good, err = math.nan, math.nan
             ok = status == "ok"
+            step_error = None
             if ok:
                 vo_good = float(motion_rover[0, 3])
                 err = float(np.linalg.norm(motion_rover[:3, 3] - true_motion[:3, 3]))
+                if covariance is not None:
+                    R = self._last_frame_truth[:3, :3]
+                    C = np.asarray(covariance, dtype=float)[:3, :3]
+                    e = R @ (np.asarray(motion_rover, dtype=float)[:3, 3] - true_motion[:3, 3])
+                    step_error = VoStepError(float(np.linalg.norm(true_motion[:3, 3])), e, R @ C @ R.T)
+            self.vo_step_errors.append(step_error)
             rec = VoStepRecord(
                 truth.t_s,
                 status,
@@ -328,7 +394,11 @@ class Evaluator:
             rms_position_error_m={
                 k: rms_position_error_m(tr[k], truth) if k in tr else None for k in ("vo", "dead_reckoning")
             },
-            extra={"kitti_translation_error_pct": self.kitti()} | extra,
+            extra={
+                "kitti_translation_error_pct": self.kitti(),
+                "vo_covariance_nees": vo_covariance_nees(self.vo_step_errors),
+            }
+            | extra,
             timing={"vo_step_ms_median": round(float(np.median(ms)), 1) if ms else None} | timing,
         )
 

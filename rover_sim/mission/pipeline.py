@@ -369,7 +369,7 @@ class Mission:
         res = out.result
         record = self.evaluator.vo_step(
             self.world.truth_pose(), res.status, res.motion_rover, out.commanded_m, int(res.n_inliers), out.ms,
-            reason=str(getattr(res, "reason", "")), no_texture=no_texture,
+            reason=str(getattr(res, "reason", "")), no_texture=no_texture, covariance=getattr(res, "covariance", None),
         )  # fmt: skip
         t = self.sim.time_s
         if record is not None:

@@ -10,7 +10,13 @@ import pytest
 
 from nav.trajectory import Pose, Trajectory
 from nav.types import EncoderSample, ImuSample
-from rover_sim.mission.evaluator import rms_position_error_m, segment_errors_pct
+from rover_sim.mission.evaluator import (
+    CHI2_3DOF_MEDIAN,
+    VoStepError,
+    rms_position_error_m,
+    segment_errors_pct,
+    vo_covariance_nees,
+)
 from rover_sim.mission.observation import Observation
 from rover_sim.mission.odometry_spec import FLIGHT_DEFAULTS, OdometryErrorSpec
 from rover_sim.mission.onboard import Onboard
@@ -134,6 +140,33 @@ def test_segment_and_rms_metrics_see_the_sawtooth():
     rms = rms_position_error_m(est, truth)
     assert 0.01 < rms < 0.03  # 0.05 x a uniform 0-0.7 m ramp: RMS 0.05 x 0.7 / sqrt(3) = 0.020
     assert rms_position_error_m(truth, truth) == 0.0
+
+
+def test_vo_covariance_nees_tells_consistent_optimistic_and_biased_covariances_apart():
+    """Steps whose errors match their covariance score the chi-square median per step and over segments; a covariance
+    ten times too small in sigma scores about 100 times that; an error common to every step (a calibration bias)
+    passes per step but grows over segments. A refused step (None) ends a segment."""
+    rng = np.random.default_rng(3)
+    sigma, step_m, n = 0.002, 0.5, 400
+    cov = sigma**2 * np.eye(3)
+
+    def steps(err_sigma: float, bias: float = 0.0) -> list[VoStepError]:
+        errs = rng.normal(0.0, err_sigma, (n, 3)) + bias
+        return [VoStepError(step_m, e, cov) for e in errs]
+
+    good = vo_covariance_nees(steps(sigma))
+    assert abs(good["step_median"] - CHI2_3DOF_MEDIAN) < 0.5
+    assert abs(good["segment_median"]["5m"] - CHI2_3DOF_MEDIAN) < 1.5
+    assert vo_covariance_nees(steps(10 * sigma))["step_median"] > 50 * CHI2_3DOF_MEDIAN
+    biased = vo_covariance_nees(steps(sigma, bias=sigma))
+    assert biased["step_median"] < 3 * CHI2_3DOF_MEDIAN  # per step it looks almost fine ...
+    # ... but summed over n steps the bias grows as n^2 against n: about 3 n + 3 (9 over 1 m, 33 over 5 m)
+    assert biased["segment_median"]["5m"] > 5 * biased["step_median"]
+    assert biased["segment_median"]["5m"] > 2.5 * biased["segment_median"]["1m"]
+    # a refusal every 5 steps (2.5 m): no 5 m segment completes
+    broken = [s if k % 5 else None for k, s in enumerate(steps(sigma))]
+    assert vo_covariance_nees(broken)["segment_median"]["5m"] is None
+    assert vo_covariance_nees([None, None]) is None
 
 
 @pytest.mark.slow
