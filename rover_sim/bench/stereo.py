@@ -14,7 +14,9 @@ the true correspondence (:mod:`rover_sim.bench.stereo_flight`).
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import cv2
@@ -149,6 +151,8 @@ def _rows(pairs: list[SimPair], resolution_px: int, repeats: int) -> list[dict]:
             ),
             repeats,
         )
+        with _opencv_threads(1):  # StereoBM on one thread: what its second thread buys at this size
+            bm1_ms = _time_ms(lambda p=p: stereobm_baseline(p.left, p.right, n_disp, params.window_px), repeats)
         rows.append(
             {
                 "pair": p.label,
@@ -157,6 +161,7 @@ def _rows(pairs: list[SimPair], resolution_px: int, repeats: int) -> list[dict]:
                 "stereobm": score(bm, p.gt_disparity_px),
                 "ours_ms": ours_ms,
                 "stereobm_ms": bm_ms,
+                "stereobm_1thread_ms": bm1_ms,
             }
         )
     return rows
@@ -166,6 +171,7 @@ def _aggregate(rows: list[dict]) -> dict:
     return {
         "ours_ms": float(np.median([r["ours_ms"] for r in rows])),
         "stereobm_ms": float(np.median([r["stereobm_ms"] for r in rows])),
+        "stereobm_1thread_ms": float(np.median([r["stereobm_1thread_ms"] for r in rows])),
         "ours_bad1": float(np.mean([r["ours"][1] for r in rows])),
         "stereobm_bad1": float(np.mean([r["stereobm"][1] for r in rows])),
         "ours_density": float(np.mean([r["ours"][0] for r in rows])),
@@ -238,9 +244,10 @@ def _bench_profile(profile: str, resolutions_px: tuple[int, ...], repeats: int) 
     ratios = {res: (agg["ratio"] if res == 256 else agg[f"ratio_{res}"]) for res in per_res}
     for res, ratio in ratios.items():
         threads = per_res[res]["threads"]
+        bm1 = per_res[res]["stereobm_1thread_ms"]
         print(
             f"[{profile}] speed ratio ours/StereoBM @{res} px = {ratio:.2f} (acceptance <= {bar}; threads: ours "
-            f"{threads['ours']}, StereoBM {threads['stereobm']})"
+            f"{threads['ours']}, StereoBM {threads['stereobm']}; StereoBM on one thread {bm1:.1f} ms)"
         )
     better = beats_stereobm(agg)
     print(f"[{profile}] denser and fewer bad-1px than StereoBM (256 px): {'yes' if better else 'NO'}")
@@ -253,6 +260,17 @@ def threads_used(shape: tuple[int, int]) -> dict[str, int]:
     """Threads each side may run on for images of ``shape``: ours from :func:`nav.stereo.pipeline_threads`,
     StereoBM's from OpenCV's thread pool (``cv2.getNumThreads()``: StereoBM splits its rows among them)."""
     return {"ours": pipeline_threads(shape), "stereobm": cv2.getNumThreads()}
+
+
+@contextlib.contextmanager
+def _opencv_threads(n: int) -> Iterator[None]:
+    """OpenCV's thread count set to ``n`` inside the block, restored after."""
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(n)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(before)
 
 
 def _time_ms(fn, repeats: int = 15) -> float:
