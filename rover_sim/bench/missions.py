@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 from rover_sim import interrupts
@@ -159,20 +160,17 @@ def bench_vo(
         "| VO ms/step | acceptance | pass |"
     )
     print("|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|:-:|")
-    for label, per in runs:
-        for case, r in per.items():
-            if case not in chosen:
-                continue
-            accept = acceptance.describe(_as_scenario(chosen[case]).passing)
-            seg, rms = r["kitti_segment_error_pct"], r["rms_position_error_m"]
-            print(
-                f"| {label} | {r['profile']} | {r['vo_update']} | {case} | {_fmt(r['distance_m'])} | "
-                f"{_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | "
-                f"{_segments(seg.get('dead_reckoning'))} | {_segments(seg.get('vo'))} | "
-                f"{_metres(rms.get('dead_reckoning'))} / {_metres(rms.get('vo'))} | {_fmt(r['vo_convergence_pct'])} | "
-                f"{r['false_positives']} | {_fmt(r['vo_step_ms_median'])} | {accept} | "
-                f"{'yes' if r['passed'] else 'NO'} |"
-            )
+    for label, case, r in _table_rows(runs, chosen):
+        accept = acceptance.describe(_as_scenario(chosen[case]).passing)
+        seg, rms = r["kitti_segment_error_pct"], r["rms_position_error_m"]
+        print(
+            f"| {label} | {r['profile']} | {r['vo_update']} | {case} | {_fmt(r['distance_m'])} | "
+            f"{_fmt(r['max_slip_pct'])} | {_fmt(r['dr_error_pct'])} | {_fmt(r['vo_error_pct'])} | "
+            f"{_segments(seg.get('dead_reckoning'))} | {_segments(seg.get('vo'))} | "
+            f"{_metres(rms.get('dead_reckoning'))} / {_metres(rms.get('vo'))} | {_fmt(r['vo_convergence_pct'])} | "
+            f"{r['false_positives']} | {_fmt(r['vo_step_ms_median'])} | {accept} | "
+            f"{'yes' if r['passed'] else 'NO'} |"
+        )
     _print_nees(runs, chosen)
     write_json(json_path, results)
     return results
@@ -186,19 +184,24 @@ def _print_nees(runs: list[tuple[str, dict]], chosen: dict) -> None:
         "(consistent: median 2.37, 3 dof) |"
     )
     print("|---|---|---|---|---:|---:|---:|---|")
+    for label, case, r in _table_rows(runs, chosen):
+        n = r.get("vo_covariance_nees")
+        if n is None:
+            print(f"| {label} | {r['profile']} | {r['vo_update']} | {case} | - | - | - | no covariance |")
+            continue
+        seg = n["segment_median"]
+        print(
+            f"| {label} | {r['profile']} | {r['vo_update']} | {case} | {_fmt(n['step_median'])} | "
+            f"{_fmt(seg.get('1m'))} | {_fmt(seg.get('5m'))} | |"
+        )
+
+
+def _table_rows(runs: list[tuple[str, dict]], chosen: dict) -> Iterator[tuple[str, str, dict]]:
+    """(variant label, case, result) of every run case in the chosen set, in run order."""
     for label, per in runs:
         for case, r in per.items():
-            if case not in chosen:
-                continue
-            n = r.get("vo_covariance_nees")
-            if n is None:
-                print(f"| {label} | {r['profile']} | {r['vo_update']} | {case} | - | - | - | no covariance |")
-                continue
-            seg = n["segment_median"]
-            print(
-                f"| {label} | {r['profile']} | {r['vo_update']} | {case} | {_fmt(n['step_median'])} | "
-                f"{_fmt(seg.get('1m'))} | {_fmt(seg.get('5m'))} | |"
-            )
+            if case in chosen:
+                yield label, case, r
 
 
 COMPARISON_KEYS = ("plugins", "ideal", "full_pose")  # bench vo top-level keys that are not flight cases
