@@ -15,8 +15,9 @@ scores, and XYZ range images are produced as the final result." MER matched 256x
    steadily down the image, so a row needs only a few disparities; rows where nothing matches (the sky) are skipped.
 3. :func:`sad_search` - sum of absolute differences over a square window for every searched disparity along the
    epipolar line (row). One pass over the disparities gives the best match of every left pixel, the best match of
-   every *right* pixel (for the left-right check), the two best scores per disparity class (for the uniqueness
-   check), and keeps every SAD score so the scores around the winner can be read back for step 4.
+   every *right* pixel (for the left-right check), the best score per disparity class and the least of their
+   second-best scores (for the uniqueness check), and keeps every SAD score so the scores around the winner can be
+   read back for step 4.
 4. :func:`subpixel_quadratic` - a parabola through the SAD scores at d-1, d, d+1.
 5. Consistency checks: :func:`edge_mask` (the winner and both its neighbours were searched), :func:`texture_mask`
    (local RMS of the band-passed image), :func:`match_quality_mask` (the winning SAD is far below a chance match's),

@@ -63,8 +63,9 @@ def sad_search(
     ``key = SAD + index / 256``. The running minimum of the keys over the left pixels gives the left winner; the
     running minimum over the *right* pixels ``u_right = u - s`` gives the right-referenced winner (the same scores,
     so exactly the disparity a search from the right image would find). Per disparity class ``index mod 3`` the
-    best two keys are kept: the best score more than 1 px from the winner is then the best of three candidates (a
-    class holds at most one neighbour of the winner), so the uniqueness test is exact without a second pass.
+    best key is kept, and the least of the classes' second-best keys: the best score more than 1 px from the winner
+    is then the best of three candidates (a class holds at most one neighbour of the winner), so the uniqueness
+    test is exact without a second pass.
     """
     left_q, right_q = _as_pair(left_q, right_q)
     _check_size(left_q.shape, params)
@@ -96,7 +97,11 @@ def compute_disparity(left_u8: np.ndarray, right_u8: np.ndarray, params: StereoP
     """Left-referenced disparity (px, float32, NaN where invalid) of a rectified 8-bit pair, MER style."""
     left_u8, right_u8 = _as_pair(left_u8, right_u8)
     _check_size(left_u8.shape, params)
-    return _pipeline(left_u8.shape, params).run(left_u8, right_u8)
+    pipe = _pipeline(left_u8.shape, params)
+    if pipeline_threads(left_u8.shape) > 1:
+        return pipe.run(left_u8, right_u8)
+    with _serial_opencv():
+        return pipe.run(left_u8, right_u8)
 
 
 def _check_size(shape: tuple[int, int], params: StereoParams) -> None:
@@ -359,6 +364,36 @@ _POOL: list[ThreadPoolExecutor] = []  # the worker pool, once created
 _POOL_LOCK = threading.Lock()
 os.register_at_fork(after_in_child=_POOL.clear)  # (a forked child has no worker thread: it makes its own)
 
+
+class _serial_opencv:
+    """OpenCV on the calling thread only (``cv2.setNumThreads(1)``) while a single-threaded pipeline runs, restored
+    when the last such call in the process leaves (calls may nest or overlap in several threads).
+
+    At 256x256 a call is ~700 OpenCV calls of a few microseconds; a few of them (``pyrDown``, ``pyrUp``) split their
+    rows with OpenCV's worker threads and then wait for them. When the second core is busy the worker is not
+    scheduled in time and the caller waits: with a memory-streaming process on the other core of this 2-core machine
+    a 256^2 ``bench stereo`` call took 7.4 ms with OpenCV's two threads and 2.6-3.2 ms with one; on a quiet machine
+    the two take the same time. StereoBM runs one stripe at this size (OpenCV sizes its stripes to ~8M SAD terms).
+    Other threads' OpenCV calls during such a call run on one thread too.
+    """
+
+    def __enter__(self) -> None:
+        with _SERIAL_LOCK:
+            if _SERIAL_STATE[0] == 0:
+                _SERIAL_STATE[1] = cv2.getNumThreads()
+                if _SERIAL_STATE[1] > 1:
+                    cv2.setNumThreads(1)
+            _SERIAL_STATE[0] += 1
+
+    def __exit__(self, *exc: object) -> None:
+        with _SERIAL_LOCK:
+            _SERIAL_STATE[0] -= 1
+            if _SERIAL_STATE[0] == 0 and _SERIAL_STATE[1] > 1:
+                cv2.setNumThreads(_SERIAL_STATE[1])
+
+
+_SERIAL_LOCK = threading.Lock()
+_SERIAL_STATE = [0, 0]  # [calls inside, OpenCV's thread count before the first of them entered]
 
 _THREAD = threading.local()
 

@@ -94,7 +94,9 @@ class Engine:
             self.plus_run = np.empty(shape, np.float32)
             self.updated = np.zeros((2, h_px, w_px), np.uint8)
         self.best = np.empty((3, h_px, w_px), np.float32)  # best key per disparity class (index mod 3)
-        self.second = np.empty((3, h_px, w_px), np.float32)  # second-best key per class
+        # the least of the classes' second-best keys: updating one plane with every class's candidate
+        # max(best_c, key) leaves min_c(second_c), all the uniqueness test needs (see scores)
+        self.second = np.empty(shape, np.float32)
         self.best_right = np.empty(shape, np.float32)  # best key per right pixel
         self.tmp = np.empty(shape, np.float32)
         # |L - R| of the bands of several disparities stacked (see search), each with hw rows more above and below
@@ -109,6 +111,7 @@ class Engine:
         depth = np.float32 if exact else np.int32
         self.depth = depth
         self.window = RowWindow.full(h_px, num_disparities)
+        self._full_plan: tuple[RowWindow, list[tuple[int, int]]] | None = None
         self.u_grid, self.v_grid = grids(shape)
         f32, u8 = (lambda: np.empty(shape, np.float32)), (lambda: np.empty(shape, np.uint8))
         self.best_all, self.cost, self.index, self.right_index = f32(), f32(), f32(), f32()
@@ -140,7 +143,7 @@ class Engine:
                     self.right_q[:, : w_px - s],
                     self.costs[plane, :, s + hw :],
                     self.best[c, :, s + hw :],
-                    self.second[c, :, s + hw :],
+                    self.second[:, s + hw :],
                     self.tmp[:, :n_cols],
                     self.best_right[:, hw : w_px - s],
                     self._rolling_views(i, s + hw) if self.rolling else None,
@@ -166,9 +169,15 @@ class Engine:
         )
 
     def plan(self, window: RowWindow | None) -> list[list[tuple[int, int]]]:
-        """Set the search's row windows (all disparities if None); per disparity, the bands of rows to search."""
-        self.window = window if window is not None else RowWindow.full(self.shape[0], self.num_disparities)
-        return _row_bands(self.window, self.num_disparities)
+        """Set the search's row windows (all disparities if None); per disparity, the bands of rows to search
+        (the full search's: made once, shared; callers do not modify bands)."""
+        if window is None:
+            if self._full_plan is None:
+                self._full_plan = (RowWindow.full(self.shape[0], self.num_disparities), [[(0, self.shape[0])]])
+            self.window = self._full_plan[0]
+            return self._full_plan[1] * self.num_disparities
+        self.window = window
+        return _row_bands(window, self.num_disparities)
 
     def search(self, window: RowWindow | None, rows: tuple[int, int] | None = None) -> None:
         """Search ``self.left_q`` against ``self.right_q`` (quantised images, written by the caller).
@@ -190,7 +199,7 @@ class Engine:
         if self.rolling and (part or any(a < v0 or b > v1 for runs in bands for a, b in runs)):
             raise ValueError("the rolling search runs in one part covering every searched row")
         self.best[:, v0:v1].fill(NO_MATCH)
-        self.second[:, v0:v1].fill(NO_MATCH)
+        self.second[v0:v1].fill(NO_MATCH)
         self.best_right[v0:v1].fill(NO_MATCH)
         if self.rolling:
             for buf in (self.best_run, self.minus_run, self.plus_run):
@@ -343,7 +352,7 @@ class Engine:
         # Best score more than 1 px from the winner. Each class holds exactly one of the disparities w - 1, w, w + 1;
         # if a class's best is that one its second is far, else its best is. Sorted, the class bests are the
         # winner's key, then mid and top: the far minimum among them is mid unless mid is a neighbour's key, else
-        # top unless top is; the class seconds are always candidates.
+        # top unless top is; the class seconds (their least: self.second) are always candidates.
         b0, b1, b2 = self.best[0, sl], self.best[1, sl], self.best[2, sl]
         top = cv2.max(b0, b1, far_tmp)
         mid = cv2.max(self.best01[sl], cv2.min(top, b2, stack_row), stack_row)
@@ -354,9 +363,7 @@ class Engine:
             cv2.bitwise_or(near, cv2.compare(cand, key_plus, cv2.CMP_EQ, tmp_mask), near)
             # top: NO_MATCH where near; mid: top where near (the candidate: mid, else top, else none)
             cv2.copyTo(self.no_match[sl] if cand is top else top, near, cand)
-        far = cv2.min(self.second[0, sl], self.second[1, sl], self.far[sl])
-        cv2.min(far, self.second[2, sl], far)
-        cv2.min(far, mid, far)
+        far = cv2.min(self.second[sl], mid, self.far[sl])
         return self.cost[sl], cost_minus, cost_plus, np.floor(far, out=far)
 
 
@@ -377,19 +384,27 @@ def _carry_neighbours(key: np.ndarray, views: tuple, a: int, b: int) -> None:
 def _row_bands(window: RowWindow, num_disparities: int, merge_gap: int = 40) -> list[list[tuple[int, int]]]:
     """For each disparity index, the bands ``[a, b)`` of rows that search it (bands at most ``merge_gap`` rows apart
     are merged: each band costs a few OpenCV calls and half a window of rows above and below)."""
-    h_px = window.lo.size
-    if not window.lo.any() and (window.hi == num_disparities - 1).all():  # the full window: every row
+    lo, hi = window.lo, window.hi
+    h_px = lo.size
+    if not lo.any() and (hi == num_disparities - 1).all():  # the full window: every row
         return [[(0, h_px)] for _ in range(num_disparities)]
-    i, n_v = np.arange(num_disparities)[:, None], h_px + 1
-    inside = np.zeros((num_disparities, h_px + 2), bool)
-    np.less_equal(window.lo, i, out=inside[:, 1:-1])
-    inside[:, 1:-1] &= i <= window.hi
-    # runs in (disparity, row) order: where a run starts, and one past where it ends
-    starts_i, starts_v = np.divmod(np.flatnonzero(inside[:, 1:] > inside[:, :-1]), n_v)
-    ends_v = np.flatnonzero(inside[:, 1:] < inside[:, :-1]) % n_v
+    # segments of rows sharing one window (row_search_window gives the same window to about 4 rows at a time)
+    change = np.ones(h_px, bool)
+    np.not_equal(lo[1:], lo[:-1], out=change[1:])
+    change[1:] |= hi[1:] != hi[:-1]
+    seg_start = np.flatnonzero(change)
+    seg_end = np.append(seg_start[1:], h_px)
+    i, n_s = np.arange(num_disparities)[:, None], seg_start.size + 1
+    inside = np.zeros((num_disparities, n_s + 1), bool)
+    np.less_equal(lo[seg_start], i, out=inside[:, 1:-1])
+    inside[:, 1:-1] &= i <= hi[seg_start]
+    # runs in (disparity, segment) order: the segment where a run starts, and one past the one where it ends
+    starts_i, starts_s = np.divmod(np.flatnonzero(inside[:, 1:] > inside[:, :-1]), n_s)
     bands: list[list[tuple[int, int]]] = [[] for _ in range(num_disparities)]
     if starts_i.size == 0:
         return bands
+    starts_v = seg_start[starts_s]
+    ends_v = seg_end[np.flatnonzero(inside[:, 1:] < inside[:, :-1]) % n_s - 1]
     # a run opens a new band unless it follows a run of the same disparity at most merge_gap rows before
     opens = np.ones(starts_i.size, bool)
     opens[1:] = (starts_i[1:] != starts_i[:-1]) | (starts_v[1:] - ends_v[:-1] > merge_gap)
