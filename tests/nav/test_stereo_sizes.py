@@ -270,3 +270,36 @@ def test_fused_key_is_exact_and_taken_where_row_sums_allow(monkeypatch: pytest.M
     assert taken and not any(taken)
     np.testing.assert_array_equal(fused, two_step)
     assert np.isfinite(fused).mean() > 0.5
+
+
+def test_small_images_run_opencv_on_one_thread_and_restore_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Below 512x512 the pipeline runs OpenCV single-threaded (a busy second core stalled its row-splitting calls);
+    the caller's thread count is back afterwards, also when a call fails or calls nest."""
+    pair = synth_pair(seed=1)
+    left, right = pair.left, pair.right
+    seen: list[int] = []
+    run = pipeline_mod._Pipeline.run
+
+    def spy(self, *args):  # noqa: ANN001, ANN002, ANN202
+        seen.append(cv2.getNumThreads())
+        if len(seen) == 2:
+            raise RuntimeError("boom")
+        if len(seen) == 3:  # a nested call (another thread's, say) restores nothing until the outer one leaves
+            compute_disparity(left, right)
+            seen.append(cv2.getNumThreads())
+        return run(self, *args)
+
+    monkeypatch.setattr(pipeline_mod._Pipeline, "run", spy)
+    before = cv2.getNumThreads()
+    try:
+        cv2.setNumThreads(2)
+        compute_disparity(left, right)
+        assert cv2.getNumThreads() == 2
+        with pytest.raises(RuntimeError, match="boom"):
+            compute_disparity(left, right)
+        assert cv2.getNumThreads() == 2
+        compute_disparity(left, right)
+        assert cv2.getNumThreads() == 2
+        assert seen == [1, 1, 1, 1, 1]
+    finally:
+        cv2.setNumThreads(before)
