@@ -32,30 +32,41 @@ NaN everywhere. :func:`stereobm_baseline` is plain OpenCV StereoBM, for benchmar
 Implementation: the SAD engine is ours rather than ``cv2.StereoBM`` because StereoBM exposes neither its SAD scores
 (needed for the quadratic fit: its own sub-pixel step is an equiangular fit quantised to 1/16 px) nor the
 right-referenced disparities, and cannot search a different range on each row (using it for the search would also
-take a second full StereoBM run, on flipped images, for the left-right check). For each disparity, only the band of
-rows that search it is processed: its ``absdiff`` goes into a stack shared by the bands of many disparities, one
-``integral`` and one subtraction per stack give every band's sums over the window's rows, then per band one
-``addWeighted`` (the sums over the window's columns), a running max and three running minima, all inside OpenCV; the
-score and the disparity index share one float32 ``key = SAD + index / 256`` so one ``min`` tracks both the best score
-and its argmin. Windows are clipped at the top, bottom and right image borders (the same pixels for every disparity,
-so the scores stay comparable); on the left the window must lie inside the right image. Everything after the search
-is a few dozen OpenCV calls on the searched rows, written into buffers kept between calls (:class:`_Pipeline`; a
-fresh 256 KB array costs page faults that take longer than the call filling it). On the 256x256 hazcam pairs of
-``rover-sim bench stereo`` (32 disparities) a call takes 1.8-1.9 times OpenCV's StereoBM in the same process on a
-shared 2-core machine (load 2-3): the full-resolution search about a third of it, band-pass, coarse search, SAD
-score read-back and blob filter about a tenth each. Any size up to 4096 px a side runs (window sums in int32 where
-float32 would round; the SAD volume is replaced by the scores beside each running winner when it would exceed the
-budget), e.g. full-resolution 1024x1024 navcam pairs, 741x500 or 640x480 (Rocky 8) images; the keys of large images
-are not all exact yet (see :class:`nav.stereo.sad.Engine`). From 512x512 px up a call runs on two threads (the
-caller's and one worker's, :func:`pipeline_threads`; OpenCV releases the GIL): the left band-pass beside the right
-one, the texture check beside the search, and the search with steps 3-5 split into two row ranges (disjoint rows of
-every buffer, exact sums: the same bits as one thread). Smaller images stay on one thread: their many short calls
-lose more to GIL hand-offs than the overlap gains.
+take a second full StereoBM run, on flipped images, for the left-right check). Two engines implement step 3 with the
+same results, bit for bit (``tests/nav/test_stereo_engines.py``):
+
+- :class:`nav.stereo.fused.FusedEngine` (the default where numba is installed, as it is with rover-sim): one
+  compiled pass per row. Each searched disparity's column sums over the window's rows are carried from row to row
+  (one row in, one out), the window sums formed from them, and each key ``SAD * 256 + index`` updates the running
+  best with its neighbours' keys, the per-class bests and least second-best (uniqueness), and the right pixel's best
+  while it is in a register. A row's state stays in the cache, so its time does not swing with the other core's
+  memory traffic.
+- :class:`nav.stereo.sad.Engine` (``NAV_STEREO_ENGINE=opencv``; the fallback without numba, so ``nav`` still runs on
+  numpy, scipy and OpenCV alone): the bands of rows that search each disparity are stacked, one ``integral`` and one
+  subtraction give every band's sums over the window's rows, then per band one ``addWeighted`` (the sums over the
+  window's columns) and a running max and three running minima, all inside OpenCV, with the score and the index in
+  one float32 key ``SAD + index / 256``.
+
+Windows are clipped at the top, bottom and right image borders (the same pixels for every disparity, so the scores
+stay comparable); on the left the window must lie inside the right image. Everything after the search is a few dozen
+OpenCV calls on the searched rows, written into buffers kept between calls (:class:`_Pipeline`; a fresh 256 KB array
+costs page faults that take longer than the call filling it). On the 256x256 hazcam pairs of ``rover-sim bench
+stereo`` (32 disparities) a call with the compiled engine takes about 0.8 times OpenCV's StereoBM in the same process
+on this 2-core machine (0.9 beside a process streaming memory on the other core; the OpenCV engine: 1.1 and 1.4-1.6);
+at 1024x1024 about 0.55. Any size up to 4096 px a side runs with exact sums (int32 keys in the compiled engine; in the
+OpenCV engine window sums in int32 where float32 would round, and the SAD volume replaced by the scores beside each
+running winner when it would exceed the budget), e.g. full-resolution 1024x1024 navcam pairs, 741x500 or 640x480
+(Rocky 8) images. From 512x512 px up a call runs on two threads (the caller's and one worker's,
+:func:`pipeline_threads`; OpenCV and the compiled kernel release the GIL): the left band-pass beside the right one,
+the texture check beside the search, and the search with steps 3-5 split into two row ranges (disjoint rows of every
+buffer, exact sums: the same bits as one thread). Smaller images stay on one thread: their many short calls lose
+more to GIL hand-offs than the overlap gains.
 
 Modules, in the order of the steps: :mod:`nav.stereo.params` (parameters and result types),
-:mod:`nav.stereo.bandpass` (step 1, and the texture check), :mod:`nav.stereo.sad` (the SAD engine, step 3, and
-sub-pixel interpolation, step 4), :mod:`nav.stereo.checks` (steps 5-6), :mod:`nav.stereo.pipeline` (the whole
-pipeline, the row windows of step 2, the step functions that share its buffers, and the XYZ range images).
+:mod:`nav.stereo.bandpass` (step 1, and the texture check), :mod:`nav.stereo.fused` (the compiled SAD engine, step 3),
+:mod:`nav.stereo.sad` (the OpenCV SAD engine, step 3, and sub-pixel interpolation, step 4), :mod:`nav.stereo.checks`
+(steps 5-6), :mod:`nav.stereo.pipeline` (the whole pipeline, the row windows of step 2, the step functions that
+share its buffers, and the XYZ range images).
 """
 
 from nav.stereo.bandpass import bandpass, quantise, texture_mask
@@ -75,6 +86,7 @@ from nav.stereo.pipeline import (
     pipeline_threads,
     range_image,
     row_search_window,
+    sad_engine,
     sad_search,
     stereobm_baseline,
     xyz_cam_to_rover,
@@ -99,6 +111,7 @@ __all__ = [
     "quantise",
     "range_image",
     "row_search_window",
+    "sad_engine",
     "sad_search",
     "speckle_mask",
     "stereobm_baseline",

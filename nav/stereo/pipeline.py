@@ -17,7 +17,12 @@ from nav.camera import PinholeCamera, StereoRig
 from nav.stereo.bandpass import bandpass_into, quantise_gain, quantise_into, texture_into
 from nav.stereo.checks import discontinuity, left_right, sad_limit, speckle_filter, uniqueness
 from nav.stereo.params import RangeImage, RowWindow, SadSearch, StereoParams
-from nav.stereo.sad import Engine, clip_bands, subpixel
+from nav.stereo.sad import Engine, subpixel
+
+try:  # the compiled SAD search (numba); without it the OpenCV engine runs, with the same results
+    from nav.stereo.fused import FusedEngine
+except ImportError:  # pragma: no cover - numba is a dependency of the rover-sim package
+    FusedEngine = None
 
 MAX_SIDE_PX = 4096  # images up to this side (larger ones: bin them; the SAD engine's buffers grow as H * W)
 # A parabola curvature (SAD units) this large means a neighbour's score was NO_MATCH (not searched).
@@ -25,6 +30,10 @@ _CURVATURE_LIMIT = float(2**19)
 _COARSE_SCALE = 4  # row_search_window matches the images binned 4x4 (two pyrDown)
 _COARSE_MIN_VOTES = 8  # a disparity must be found this many times near a row to enter its search window
 _NONE_INDEX = -3.0  # the coarse right index where a right pixel has no winner (fails a 1 px left-right test)
+# The SAD engine: "fused" (nav.stereo.fused, compiled with numba) or "opencv" (nav.stereo.sad.Engine, OpenCV calls
+# only). Both give the same disparities bit for bit; the fused one is 2-3x faster at 256^2 and does not slow down with
+# the other core's memory traffic. Set NAV_STEREO_ENGINE=opencv to run nav's stereo with numpy, scipy and OpenCV alone.
+SAD_ENGINE = os.environ.get("NAV_STEREO_ENGINE", "fused" if FusedEngine is not None else "opencv")
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -118,7 +127,8 @@ class _Pipeline:
     def __init__(self, shape: tuple[int, int], params: StereoParams) -> None:
         self.shape, self.params = shape, params
         cap2 = 2 * params.quantise_cap
-        self.engine = Engine(shape, params.min_disparity, params.num_disparities, params.window_px, cap2)
+        engine_class = _engine_class()
+        self.engine = engine_class(shape, params.min_disparity, params.num_disparities, params.window_px, cap2)
         f32, u8 = (lambda s=shape: np.empty(s, np.float32)), (lambda s=shape: np.empty(s, np.uint8))
         self.bp_left, self.bp_right, self.scratch, self.scratch2, self.scratch3, self.curvature, self.offset = (
             f32() for _ in range(7)
@@ -140,7 +150,7 @@ class _Pipeline:
             self.min_c = params.min_disparity // f
             self.n_c = -(-(params.min_disparity + params.num_disparities) // f) - self.min_c + 1
             self.window_c = max(5, (params.window_px // 2) | 1)  # at 1/4 scale: 20 px or more of the image
-            self.coarse = Engine(shape_c, self.min_c, self.n_c, self.window_c, cap2)
+            self.coarse = engine_class(shape_c, self.min_c, self.n_c, self.window_c, cap2)
             f32c, u8c = (lambda: np.empty(shape_c, np.float32)), (lambda: np.empty(shape_c, np.uint8))
             self.left_c, self.right_c, self.scratch_c, self.scratch_c2, self.curvature_c, self.offset_c = (
                 f32c() for _ in range(6)
@@ -247,10 +257,10 @@ class _Pipeline:
             if len(parts) == 1:
                 self.search_rows(bands, v0, v1, 0, gain_left, disparity, texture)
             else:  # 3-5 on the rows' top part in the worker, the bottom part here (disjoint rows of every buffer)
-                part0 = clip_bands(bands, *parts[0])
+                part0 = engine.clip(bands, *parts[0])
                 job = pool.submit(self.search_rows, part0, *parts[0], 0, gain_left, disparity, texture)
                 try:
-                    self.search_rows(clip_bands(bands, *parts[1]), *parts[1], 1, gain_left, disparity, texture)
+                    self.search_rows(engine.clip(bands, *parts[1]), *parts[1], 1, gain_left, disparity, texture)
                 finally:
                     job.result()
         finally:
@@ -322,6 +332,23 @@ class _Pipeline:
             cv2.addWeighted(out, 16.0, out, 0.0, 0.0, dst=self.fixed[rows], dtype=cv2.CV_16S)  # 1/16 px
 
 
+def sad_engine() -> str:
+    """The SAD engine :func:`compute_disparity` runs: "fused" (compiled) or "opencv" (``NAV_STEREO_ENGINE``)."""
+    return SAD_ENGINE
+
+
+def _engine_class() -> type:
+    """The SAD engine class ``SAD_ENGINE`` names (checked: a typo in ``NAV_STEREO_ENGINE`` is an error, not a
+    silent fallback)."""
+    if SAD_ENGINE == "fused":
+        if FusedEngine is None:
+            raise ValueError("NAV_STEREO_ENGINE=fused needs numba (pip install numba), or set NAV_STEREO_ENGINE=opencv")
+        return FusedEngine
+    if SAD_ENGINE == "opencv":
+        return Engine
+    raise ValueError(f"NAV_STEREO_ENGINE={SAD_ENGINE!r}: use 'fused' or 'opencv'")
+
+
 def _split_rows(window: RowWindow, v0: int, v1: int, n_parts: int) -> list[tuple[int, int]]:
     """``v0:v1`` cut into ``n_parts`` row ranges of about equal work: a row costs its searched disparities plus
     about ``_POST_ROW_COST`` more for the steps after the search. Ranges shorter than ``_MIN_PART_ROWS``: one."""
@@ -353,8 +380,9 @@ def _worker_pool(shape: tuple[int, int]) -> ThreadPoolExecutor | None:
         return _POOL[0]
 
 
-# Smaller images run on the calling thread alone: at 256x256 a call is ~700 OpenCV calls of a few microseconds each,
-# and a worker taking turns with it at the GIL cost more than it saved (bench stereo pairs, shared 2-core machine,
+# Smaller images run on the calling thread alone: at 256x256 a call is many OpenCV calls of a few microseconds each
+# (~700 with the OpenCV SAD engine, where this was measured), and a worker taking turns with it at the GIL cost more
+# than it saved (bench stereo pairs, shared 2-core machine,
 # load 2-3: 10-15 % slower with the rows split, 1-6 % with only the band-pass and texture beside; StereoBM gained
 # nothing from its second thread there either); at 1024x1024 the calls are long and the two threads overlap.
 _THREADED_MIN_PX = 512 * 512
@@ -369,7 +397,7 @@ class _serial_opencv:
     """OpenCV on the calling thread only (``cv2.setNumThreads(1)``) while a single-threaded pipeline runs, restored
     when the last such call in the process leaves (calls may nest or overlap in several threads).
 
-    At 256x256 a call is ~700 OpenCV calls of a few microseconds; a few of them (``pyrDown``, ``pyrUp``) split their
+    At 256x256 a call is many OpenCV calls of a few microseconds (~700 with the OpenCV SAD engine); a few of them (``pyrDown``, ``pyrUp``) split their
     rows with OpenCV's worker threads and then wait for them. When the second core is busy the worker is not
     scheduled in time and the caller waits: with a memory-streaming process on the other core of this 2-core machine
     a 256^2 ``bench stereo`` call took 7.4 ms with OpenCV's two threads and 2.6-3.2 ms with one; on a quiet machine
@@ -404,7 +432,7 @@ def _pipeline(shape: tuple[int, int], params: StereoParams) -> _Pipeline:
     cache = getattr(_THREAD, "pipelines", None)
     if cache is None:
         cache = _THREAD.pipelines = {}
-    key = (tuple(shape), params)
+    key = (tuple(shape), params, SAD_ENGINE)
     pipe = cache.get(key)
     if pipe is None:
         if len(cache) >= 2:

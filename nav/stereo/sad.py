@@ -179,6 +179,11 @@ class Engine:
         self.window = window
         return _row_bands(window, self.num_disparities)
 
+    @staticmethod
+    def clip(bands: list[list[tuple[int, int]]], v0: int, v1: int) -> list[list[tuple[int, int]]]:
+        """The plan for rows ``v0:v1`` (:func:`clip_bands`)."""
+        return clip_bands(bands, v0, v1)
+
     def search(self, window: RowWindow | None, rows: tuple[int, int] | None = None) -> None:
         """Search ``self.left_q`` against ``self.right_q`` (quantised images, written by the caller).
 

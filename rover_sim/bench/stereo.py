@@ -27,6 +27,7 @@ from nav.stereo import (
     StereoParams,
     compute_disparity,
     pipeline_threads,
+    sad_engine,
     stereobm_baseline,
 )
 from rover_sim.bench import write_json
@@ -246,12 +247,14 @@ def _bench_profile(profile: str, resolutions_px: tuple[int, ...], repeats: int) 
         threads = per_res[res]["threads"]
         bm1 = per_res[res]["stereobm_1thread_ms"]
         print(
-            f"[{profile}] speed ratio ours/StereoBM @{res} px = {ratio:.2f} (acceptance <= {bar}; threads: ours "
-            f"{threads['ours']}, StereoBM {threads['stereobm']}; StereoBM on one thread {bm1:.1f} ms)"
+            f"[{profile}] speed ratio ours/StereoBM @{res} px = {ratio:.2f} (acceptance <= {bar}; SAD engine "
+            f"{sad_engine()}; threads: ours {threads['ours']}, StereoBM {threads['stereobm']}; StereoBM on one "
+            f"thread {bm1:.1f} ms)"
         )
     better = beats_stereobm(agg)
     print(f"[{profile}] denser and fewer bad-1px than StereoBM (256 px): {'yes' if better else 'NO'}")
     agg["profile"] = profile
+    agg["sad_engine"] = sad_engine()
     agg["passed"] = bool(all(r <= bar for r in ratios.values()) and better)
     return agg, all_rows, pairs_256
 

@@ -1,5 +1,6 @@
-"""Stereo at any size (issue #16 item 7): the SAD engine is exact for large and non-square pairs, with or without the
-SAD volume, and full-resolution pairs run end to end (library and ``rover-sim stereo``)."""
+"""Stereo at any size (issue #16 item 7): the SAD engines are exact for large and non-square pairs (the compiled
+engine; the OpenCV engine with or without the SAD volume), and full-resolution pairs run end to end (library and
+``rover-sim stereo``)."""
 
 from __future__ import annotations
 
@@ -18,12 +19,22 @@ sad_mod = importlib.import_module("nav.stereo.sad")
 pipeline_mod = importlib.import_module("nav.stereo.pipeline")
 
 
-@pytest.fixture(params=["volume", "rolling"])
-def engine_mode(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
-    """Run the test with the SAD volume kept (small searches) and with the rolling neighbours (large searches)."""
-    if request.param == "rolling":
+ENGINE_MODES = ["fused", "volume", "rolling"]
+
+
+def use_engine(monkeypatch: pytest.MonkeyPatch, mode: str) -> None:
+    """The compiled engine ("fused"), or the OpenCV engine with the SAD volume kept ("volume", small searches) or
+    with the rolling neighbours ("rolling", large searches); the cached pipelines are dropped."""
+    monkeypatch.setattr(pipeline_mod, "SAD_ENGINE", "fused" if mode == "fused" else "opencv")
+    if mode == "rolling":
         monkeypatch.setattr(sad_mod, "VOLUME_BUDGET_BYTES", 0)
     monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
+
+
+@pytest.fixture(params=ENGINE_MODES)
+def engine_mode(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    """Run the test with each engine (see :func:`use_engine`)."""
+    use_engine(monkeypatch, request.param)
     return request.param
 
 
@@ -32,7 +43,7 @@ def _engine(shape: tuple[int, int], params: StereoParams):  # noqa: ANN202
 
 
 @pytest.mark.parametrize("shape", [(14, 40), (23, 17)])
-def test_sad_search_equals_brute_force_in_both_modes(engine_mode: str, shape: tuple[int, int]) -> None:
+def test_sad_search_equals_brute_force_in_every_engine(engine_mode: str, shape: tuple[int, int]) -> None:
     params = StereoParams(num_disparities=16, min_disparity=2, window_px=5)
     left_q, right_q = random_search_pair(3, shape)
     res = sad_search(left_q, right_q, params)
@@ -40,7 +51,7 @@ def test_sad_search_equals_brute_force_in_both_modes(engine_mode: str, shape: tu
     check_search_against(res, brute_force_sad(left_q, right_q, params), params)
 
 
-def test_row_windows_equal_brute_force_in_both_modes(engine_mode: str) -> None:
+def test_row_windows_equal_brute_force_in_every_engine(engine_mode: str) -> None:
     """Non-monotone windows (a disparity searched on several bands of rows, merged or not)."""
     params = StereoParams(num_disparities=16, min_disparity=0, window_px=3)
     left_q, right_q = random_search_pair(4, (60, 45))
@@ -63,16 +74,16 @@ def test_row_windows_equal_brute_force_in_both_modes(engine_mode: str) -> None:
         np.testing.assert_array_equal(np.where(got[v, u] >= NO_MATCH, np.inf, got[v, u]), expected)
 
 
-def test_volume_and_rolling_give_the_same_disparity(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The rolling neighbours reproduce the volume's result bit for bit through the whole pipeline (row windows)."""
+def test_every_engine_gives_the_same_disparity(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The compiled engine and the OpenCV engine's rolling neighbours reproduce the OpenCV volume's result bit for
+    bit through the whole pipeline (row windows)."""
     scene = synth_pair(seed=3)
-    monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
+    use_engine(monkeypatch, "volume")
     ref = compute_disparity(scene.left, scene.right)
-    monkeypatch.setattr(sad_mod, "VOLUME_BUDGET_BYTES", 0)
-    monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
-    got = compute_disparity(scene.left, scene.right)
     assert np.isfinite(ref).mean() > 0.5
-    np.testing.assert_array_equal(got, ref)
+    for mode in ("fused", "rolling"):
+        use_engine(monkeypatch, mode)
+        np.testing.assert_array_equal(compute_disparity(scene.left, scene.right), ref)
 
 
 def _exact_window_sums(diff: np.ndarray, hw: int) -> np.ndarray:
@@ -86,12 +97,13 @@ def _exact_window_sums(diff: np.ndarray, hw: int) -> np.ndarray:
     return c[win:, win:] - c[:-win, win:] - c[win:, :-win] + c[:-win, :-win]
 
 
-def test_2048_pair_is_exact_where_float32_sums_are_not(monkeypatch) -> None:
+@pytest.mark.parametrize("mode", ["fused", "rolling"])
+def test_2048_pair_is_exact_where_float32_sums_are_not(monkeypatch: pytest.MonkeyPatch, mode: str) -> None:
     """A 2048x2048 pair of maximal quantised values (0..62), 21 px window: float32 integral images round (their
-    sums pass 2^24), yet every winner and its neighbours' scores equal the exact integer reference."""
-    import nav.stereo.sad
-
-    monkeypatch.setattr(nav.stereo.sad, "VOLUME_BUDGET_BYTES", 64 * 2**20)  # the rolling path, as at 4096 px
+    sums pass 2^24), yet every winner and its neighbours' scores equal the exact integer reference (the compiled
+    engine; the OpenCV engine's rolling path, as at 4096 px)."""
+    use_engine(monkeypatch, mode)
+    monkeypatch.setattr(sad_mod, "VOLUME_BUDGET_BYTES", 64 * 2**20)
     n, hw, n_disp = 2048, 10, 16  # the volume would be 256 MB: over the patched budget, rolling neighbours
     params = StereoParams(num_disparities=n_disp, window_px=2 * hw + 1)
     rng = np.random.default_rng(11)
@@ -104,7 +116,7 @@ def test_2048_pair_is_exact_where_float32_sums_are_not(monkeypatch) -> None:
     i64 = cv2.integral(diff0, sdepth=cv2.CV_64F)
     assert np.abs(f32 - i64).max() >= 1.0
     res = sad_search(left_q, right_q, params)
-    assert _engine((n, n), params).rolling
+    assert _engine((n, n), params).rolling == (mode == "rolling")
     # exact reference, streamed over the disparities (strict <: ties go to the smallest index, as in the engine)
     best = np.full((n, n), np.inf)
     index = np.full((n, n), -1)
@@ -166,10 +178,12 @@ def test_too_large_image_names_the_limit() -> None:
         compute_disparity(img, img)
 
 
-def test_wide_rows_keep_the_disparity_tag_exact() -> None:
-    """On 1024 px rows the running row sums pass 2^16 while the window sums stay small (the float32 path): every
-    winner, its score and its neighbours' scores equal the exact integer reference (a fused key formation once
-    rounded the disparity tag away there, giving ~5 % of the winners a neighbouring disparity)."""
+@pytest.mark.parametrize("mode", ["fused", "volume"])
+def test_wide_rows_keep_the_disparity_tag_exact(monkeypatch: pytest.MonkeyPatch, mode: str) -> None:
+    """On 1024 px rows the running row sums pass 2^16 while the window sums stay small (the OpenCV engine's float32
+    path): every winner, its score and its neighbours' scores equal the exact integer reference (a fused key
+    formation once rounded the disparity tag away there, giving ~5 % of the winners a neighbouring disparity)."""
+    use_engine(monkeypatch, mode)
     h_px, w_px, hw, n_disp = 24, 1024, 3, 16
     params = StereoParams(num_disparities=n_disp, window_px=2 * hw + 1)
     rng = np.random.default_rng(21)
@@ -192,6 +206,8 @@ def test_wide_rows_keep_the_disparity_tag_exact() -> None:
     v, u = np.nonzero(matched)
     np.testing.assert_array_equal(res.cost[v, u], vol[index[v, u], v, u])
     assert (index[matched] == 6).mean() > 0.9
+    if mode == "fused":
+        return  # (integer keys: no tag to round)
     keys = _engine((h_px, w_px), params).costs  # every stored key carries its own disparity's tag
     for i in range(n_disp):
         k = keys[i][keys[i] < NO_MATCH]
@@ -241,7 +257,7 @@ def test_threads_do_not_change_the_disparity(
         for _ in range(3):
             parts.clear()
             np.testing.assert_array_equal(compute_disparity(left, right, params), alone)
-            split = threaded and engine_mode == "volume"
+            split = threaded and engine_mode != "rolling"
             assert sorted(parts) == ([0, 1] if split else [0])
     finally:
         cv2.setNumThreads(n_threads)
@@ -260,7 +276,7 @@ def test_fused_key_is_exact_and_taken_where_row_sums_allow(monkeypatch: pytest.M
         return taken[-1]
 
     monkeypatch.setattr(sad_mod.Engine, "_stack_runs", spy)
-    monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
+    use_engine(monkeypatch, "volume")
     fused = compute_disparity(scene.left, scene.right)
     assert taken and all(taken)
     monkeypatch.setattr(sad_mod, "FUSED_TAG_LIMIT", 0.0)

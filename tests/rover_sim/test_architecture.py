@@ -4,6 +4,7 @@ and the onboard stack's entry points take only :class:`Observation` (issue #14).
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -120,6 +121,25 @@ def test_nav_is_pure():
             a.name for n in ast.walk(ast.parse(path.read_text())) if isinstance(n, ast.Import) for a in n.names
         }:
             assert not imported.startswith(("rover_sim", "mujoco", "rerun")), f"{name} imports {imported}"
+
+
+# nav's third-party imports: numpy, scipy and OpenCV; numba only for the compiled SAD engine, which the stereo
+# pipeline can do without (NAV_STEREO_ENGINE=opencv, the same results).
+NAV_THIRD_PARTY = {"numpy", "scipy", "cv2"}
+NAV_NUMBA_MODULES = {"nav.stereo.fused"}
+
+
+def test_nav_needs_only_numpy_scipy_opencv():
+    for name, path in MODULES.items():
+        if name.split(".")[0] != "nav":
+            continue
+        tree = ast.parse(path.read_text())
+        top = {a.name.split(".")[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+        froms = [n for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module and not n.level]
+        top |= {n.module.split(".")[0] for n in froms}
+        third = top - set(sys.stdlib_module_names) - {"nav", "__future__"}
+        allowed = NAV_THIRD_PARTY | ({"numba"} if name in NAV_NUMBA_MODULES else set())
+        assert third <= allowed, f"{name} imports {sorted(third - allowed)}"
 
 
 def test_onboard_imports_no_simulator_or_truth():
