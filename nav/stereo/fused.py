@@ -35,7 +35,9 @@ from numba import njit
 
 from nav.stereo.params import NO_MATCH, TAG, RowWindow
 
-NO_MATCH_KEY = int(NO_MATCH) * TAG  # 2^28: decodes to SAD NO_MATCH, index 0
+TAG_BITS = 8  # key = SAD << TAG_BITS | index
+assert 1 << TAG_BITS == TAG
+NO_MATCH_KEY = int(NO_MATCH) << TAG_BITS  # 2^28: decodes to SAD NO_MATCH, index 0
 NO_ROW = -(2**30)  # col_row's "no column sums held"
 MERGE_GAP_ROWS = 40  # rows of one disparity at most this far apart are searched in one band (as the OpenCV engine)
 
@@ -96,8 +98,7 @@ def sad_rows(
         second[:] = nm
         best_c[:, :] = nm
         right_best[:] = nm
-        prev_i = -2  # the last index searched on this row, and its first column
-        u0_prev = 0
+        prev_i, u0_prev = -2, 0  # the last index searched on this row, and its first column
         for i in range(n_disp):
             if mask[v, i] == 0:
                 continue
@@ -173,15 +174,15 @@ def sad_rows(
             b = best[u]
             w = b & (TAG - 1)
             out_index[v, u] = w
-            out_cost[v, u] = b >> 8
-            out_minus[v, u] = minus[u] >> 8
-            out_plus[v, u] = plus[u] >> 8
+            out_cost[v, u] = b >> TAG_BITS
+            out_minus[v, u] = minus[u] >> TAG_BITS
+            out_plus[v, u] = plus[u] >> TAG_BITS
             far = second[u]
             for c in range(3):
                 k = best_c[c, u]
                 if k < nm and abs((k & (TAG - 1)) - w) > 1:
                     far = min(far, k)
-            out_far[v, u] = far >> 8
+            out_far[v, u] = far >> TAG_BITS
             out_right_key[v, u] = right_best[u]
 
 
@@ -229,7 +230,10 @@ class FusedEngine:
             self.window = RowWindow.full(self.shape[0], self.num_disparities)
             return self._full_mask
         self.window = window
-        searched_mask(window.lo, window.hi, self.num_disparities, MERGE_GAP_ROWS, self.mask)
+        lo, hi = np.ascontiguousarray(window.lo, np.int32), np.ascontiguousarray(window.hi, np.int32)
+        if lo.shape != (self.shape[0],) or hi.shape != lo.shape:
+            raise ValueError(f"row window of {lo.shape} and {hi.shape} rows for images of {self.shape[0]} rows")
+        searched_mask(lo, hi, self.num_disparities, MERGE_GAP_ROWS, self.mask)
         return self.mask
 
     @staticmethod

@@ -397,11 +397,12 @@ class _serial_opencv:
     """OpenCV on the calling thread only (``cv2.setNumThreads(1)``) while a single-threaded pipeline runs, restored
     when the last such call in the process leaves (calls may nest or overlap in several threads).
 
-    At 256x256 a call is many OpenCV calls of a few microseconds (~700 with the OpenCV SAD engine); a few of them (``pyrDown``, ``pyrUp``) split their
-    rows with OpenCV's worker threads and then wait for them. When the second core is busy the worker is not
-    scheduled in time and the caller waits: with a memory-streaming process on the other core of this 2-core machine
-    a 256^2 ``bench stereo`` call took 7.4 ms with OpenCV's two threads and 2.6-3.2 ms with one; on a quiet machine
-    the two take the same time. StereoBM runs one stripe at this size (OpenCV sizes its stripes to ~8M SAD terms).
+    At 256x256 a call is many OpenCV calls of a few microseconds (~700 with the OpenCV SAD engine); a few of them
+    (``pyrDown``, ``pyrUp``) split their rows with OpenCV's worker threads and then wait for them. When the second
+    core is busy the worker is not scheduled in time and the caller waits: with a memory-streaming process on the
+    other core of this 2-core machine a 256^2 ``bench stereo`` call took 7.4 ms with OpenCV's two threads and
+    2.6-3.2 ms with one; on a quiet machine the two take the same time. StereoBM runs one stripe at this size (OpenCV
+    sizes its stripes to ~8M SAD terms).
     Other threads' OpenCV calls during such a call run on one thread too.
     """
 
