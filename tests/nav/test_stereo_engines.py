@@ -118,3 +118,20 @@ def test_sad_search_outputs_agree_where_the_checks_read_them(monkeypatch: pytest
     assert inside.mean() > 0.5
     for name in ("cost_minus", "cost_plus"):
         np.testing.assert_array_equal(getattr(got, name)[inside], getattr(ref, name)[inside], err_msg=name)
+
+
+def test_engine_choice_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A typo in NAV_STEREO_ENGINE, or the compiled engine without numba, is a one-line error naming the variable."""
+    pair = synth_pair(seed=1)
+    left, right = pair.left, pair.right
+    monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
+    monkeypatch.setattr(pipeline_mod, "SAD_ENGINE", "fast")
+    with pytest.raises(ValueError, match="NAV_STEREO_ENGINE='fast': use 'fused' or 'opencv'"):
+        compute_disparity(left, right)
+    monkeypatch.setattr(pipeline_mod, "SAD_ENGINE", "fused")
+    monkeypatch.setattr(pipeline_mod, "FusedEngine", None)
+    with pytest.raises(ValueError, match="needs numba.*NAV_STEREO_ENGINE=opencv"):
+        compute_disparity(left, right)
+    monkeypatch.setattr(pipeline_mod, "SAD_ENGINE", "opencv")
+    assert pipeline_mod.sad_engine() == "opencv"
+    assert np.isfinite(compute_disparity(left, right)).mean() > 0.5
