@@ -428,8 +428,8 @@ _THREAD = threading.local()
 
 
 def _pipeline(shape: tuple[int, int], params: StereoParams) -> _Pipeline:
-    """The calling thread's pipeline for this shape and parameter set (two are kept: its SAD volume is up to
-    ``VOLUME_BUDGET_BYTES``, its other buffers about 100 bytes per pixel)."""
+    """The calling thread's pipeline for this shape, parameter set and SAD engine (two are kept: its buffers take
+    about 100 bytes per pixel, plus, with the OpenCV engine, a SAD volume of up to ``VOLUME_BUDGET_BYTES``)."""
     cache = getattr(_THREAD, "pipelines", None)
     if cache is None:
         cache = _THREAD.pipelines = {}
