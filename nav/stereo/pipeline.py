@@ -31,8 +31,9 @@ _COARSE_SCALE = 4  # row_search_window matches the images binned 4x4 (two pyrDow
 _COARSE_MIN_VOTES = 8  # a disparity must be found this many times near a row to enter its search window
 _NONE_INDEX = -3.0  # the coarse right index where a right pixel has no winner (fails a 1 px left-right test)
 # The SAD engine: "fused" (nav.stereo.fused, compiled with numba) or "opencv" (nav.stereo.sad.Engine, OpenCV calls
-# only). Both give the same disparities bit for bit; the fused one is 2-3x faster at 256^2 and does not slow down with
-# the other core's memory traffic. Set NAV_STEREO_ENGINE=opencv to run nav's stereo with numpy, scipy and OpenCV alone.
+# only). Both give the same disparities bit for bit; with the fused one a 256^2 call takes about 0.7 of the time
+# (bench stereo: 1.3 against 1.9 ms), barely slows with the other core's memory traffic, and keeps no SAD volume. Set
+# NAV_STEREO_ENGINE=opencv to run nav's stereo with numpy, scipy and OpenCV alone.
 SAD_ENGINE = os.environ.get("NAV_STEREO_ENGINE", "fused" if FusedEngine is not None else "opencv")
 
 
@@ -382,9 +383,9 @@ def _worker_pool(shape: tuple[int, int]) -> ThreadPoolExecutor | None:
 
 # Smaller images run on the calling thread alone: at 256x256 a call is many OpenCV calls of a few microseconds each
 # (~700 with the OpenCV SAD engine, where this was measured), and a worker taking turns with it at the GIL cost more
-# than it saved (bench stereo pairs, shared 2-core machine,
-# load 2-3: 10-15 % slower with the rows split, 1-6 % with only the band-pass and texture beside; StereoBM gained
-# nothing from its second thread there either); at 1024x1024 the calls are long and the two threads overlap.
+# than it saved (bench stereo pairs, shared 2-core machine, load 2-3: 10-15 % slower with the rows split, 1-6 % with
+# only the band-pass and texture beside; StereoBM gained nothing from its second thread there either); at 1024x1024
+# the calls are long and the two threads overlap.
 _THREADED_MIN_PX = 512 * 512
 _POST_ROW_COST = 8  # steps 3-5 after the search cost about as much per row as this many disparities
 _MIN_PART_ROWS = 16
