@@ -103,11 +103,16 @@ def sad_search(
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def compute_disparity(left_u8: np.ndarray, right_u8: np.ndarray, params: StereoParams = StereoParams()) -> np.ndarray:
-    """Left-referenced disparity (px, float32, NaN where invalid) of a rectified 8-bit pair, MER style."""
+def compute_disparity(
+    left_u8: np.ndarray, right_u8: np.ndarray, params: StereoParams = StereoParams(), engine: str | None = None
+) -> np.ndarray:
+    """Left-referenced disparity (px, float32, NaN where invalid) of a rectified 8-bit pair, MER style.
+
+    ``engine``: the SAD search, "fused" (compiled) or "opencv"; None: :func:`sad_engine` (``NAV_STEREO_ENGINE``).
+    Both give the same result bit for bit."""
     left_u8, right_u8 = _as_pair(left_u8, right_u8)
     _check_size(left_u8.shape, params)
-    pipe = _pipeline(left_u8.shape, params)
+    pipe = _pipeline(left_u8.shape, params, engine)
     if pipeline_threads(left_u8.shape) > 1:
         return pipe.run(left_u8, right_u8)
     with _serial_opencv():
@@ -125,10 +130,10 @@ def _check_size(shape: tuple[int, int], params: StereoParams) -> None:
 class _Pipeline:
     """:func:`compute_disparity` for one image shape and parameter set, with every buffer it needs."""
 
-    def __init__(self, shape: tuple[int, int], params: StereoParams) -> None:
+    def __init__(self, shape: tuple[int, int], params: StereoParams, engine: str) -> None:
         self.shape, self.params = shape, params
         cap2 = 2 * params.quantise_cap
-        engine_class = _engine_class()
+        engine_class = _engine_class(engine)
         self.engine = engine_class(shape, params.min_disparity, params.num_disparities, params.window_px, cap2)
         f32, u8 = (lambda s=shape: np.empty(s, np.float32)), (lambda s=shape: np.empty(s, np.uint8))
         self.bp_left, self.bp_right, self.scratch, self.scratch2, self.scratch3, self.curvature, self.offset = (
@@ -338,16 +343,16 @@ def sad_engine() -> str:
     return SAD_ENGINE
 
 
-def _engine_class() -> type:
-    """The SAD engine class ``SAD_ENGINE`` names (checked: a typo in ``NAV_STEREO_ENGINE`` is an error, not a
-    silent fallback)."""
-    if SAD_ENGINE == "fused":
+def _engine_class(name: str) -> type:
+    """The SAD engine class ``name`` names (checked: a typo in ``NAV_STEREO_ENGINE`` is an error, not a silent
+    fallback)."""
+    if name == "fused":
         if FusedEngine is None:
             raise ValueError("NAV_STEREO_ENGINE=fused needs numba (pip install numba), or set NAV_STEREO_ENGINE=opencv")
         return FusedEngine
-    if SAD_ENGINE == "opencv":
+    if name == "opencv":
         return Engine
-    raise ValueError(f"NAV_STEREO_ENGINE={SAD_ENGINE!r}: use 'fused' or 'opencv'")
+    raise ValueError(f"NAV_STEREO_ENGINE={name!r}: use 'fused' or 'opencv'")
 
 
 def _split_rows(window: RowWindow, v0: int, v1: int, n_parts: int) -> list[tuple[int, int]]:
@@ -428,18 +433,19 @@ _SERIAL_STATE = [0, 0]  # [calls inside, OpenCV's thread count before the first 
 _THREAD = threading.local()
 
 
-def _pipeline(shape: tuple[int, int], params: StereoParams) -> _Pipeline:
+def _pipeline(shape: tuple[int, int], params: StereoParams, engine: str | None = None) -> _Pipeline:
     """The calling thread's pipeline for this shape, parameter set and SAD engine (two are kept: its buffers take
     about 100 bytes per pixel, plus, with the OpenCV engine, a SAD volume of up to ``VOLUME_BUDGET_BYTES``)."""
     cache = getattr(_THREAD, "pipelines", None)
     if cache is None:
         cache = _THREAD.pipelines = {}
-    key = (tuple(shape), params, SAD_ENGINE)
+    engine = SAD_ENGINE if engine is None else engine
+    key = (tuple(shape), params, engine)
     pipe = cache.get(key)
     if pipe is None:
         if len(cache) >= 2:
             cache.pop(next(iter(cache)))
-        pipe = cache[key] = _Pipeline(tuple(shape), params)
+        pipe = cache[key] = _Pipeline(tuple(shape), params, engine)
     return pipe
 
 

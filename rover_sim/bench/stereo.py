@@ -5,7 +5,8 @@ hazcams on seeded sand and bedrock terrains with rocks; ground-truth disparity `
 depth. Scored pixels: terrain or rock (not the rover itself) with ground-truth depth within 3 m. ``density`` =
 fraction of scored pixels that get a disparity; ``bad1`` = fraction of those more than 1 px off. Both algorithms run
 on the same pairs in the same process, their runs interleaved (the machine may be shared); time is the median of
-the per-pair medians.
+the per-pair medians. Each pair is also run once with the other SAD engine (``nav.stereo`` has two, see
+:func:`nav.stereo.sad_engine`), untimed: the two must give the same disparity bit for bit, or the bench fails.
 
 The pairs come from :func:`pairs_for_profile`: ``"ideal"`` renders rectified pinhole pairs directly; ``"flight"``
 renders raw (distorted, CCD-formed) pairs and rectifies them with the onboard calibration, with ground truth from
@@ -41,6 +42,7 @@ from terrains import MaterialSpec, RockSpec, RoughnessSpec, TerrainRecipe, synth
 MAX_RANGE_M = 3.0
 NUM_DISPARITIES = 32  # hazcam at 256^2: fx ~68 px, B 0.1 m -> 0.35 m range at 20 px
 RESOLUTIONS_PX = (256, 1024)
+OTHER_ENGINE = {"fused": "opencv", "opencv": "fused"}  # the cross-check of each pair
 PROFILES = ("ideal", "flight")
 
 
@@ -154,6 +156,8 @@ def _rows(pairs: list[SimPair], resolution_px: int, repeats: int) -> list[dict]:
         )
         with _opencv_threads(1):  # StereoBM on one thread: what its second thread buys at this size
             bm1_ms = _time_ms(lambda p=p: stereobm_baseline(p.left, p.right, n_disp, params.window_px), repeats)
+        # the other SAD engine on the same pair (after the timing): the two must agree bit for bit
+        other = compute_disparity(p.left, p.right, params, engine=OTHER_ENGINE[sad_engine()])
         rows.append(
             {
                 "pair": p.label,
@@ -163,6 +167,7 @@ def _rows(pairs: list[SimPair], resolution_px: int, repeats: int) -> list[dict]:
                 "ours_ms": ours_ms,
                 "stereobm_ms": bm_ms,
                 "stereobm_1thread_ms": bm1_ms,
+                "engines_agree": bool(np.array_equal(ours, other, equal_nan=True)),
             }
         )
     return rows
@@ -177,6 +182,7 @@ def _aggregate(rows: list[dict]) -> dict:
         "stereobm_bad1": float(np.mean([r["stereobm"][1] for r in rows])),
         "ours_density": float(np.mean([r["ours"][0] for r in rows])),
         "stereobm_density": float(np.mean([r["stereobm"][0] for r in rows])),
+        "engines_agree": all(r["engines_agree"] for r in rows),
     }
 
 
@@ -253,9 +259,15 @@ def _bench_profile(profile: str, resolutions_px: tuple[int, ...], repeats: int) 
         )
     better = beats_stereobm(agg)
     print(f"[{profile}] denser and fewer bad-1px than StereoBM (256 px): {'yes' if better else 'NO'}")
+    agree = [r["engines_agree"] for r in all_rows]
+    print(
+        f"[{profile}] the {OTHER_ENGINE[sad_engine()]} SAD engine gives the {sad_engine()} engine's disparity bit for "
+        f"bit: {sum(agree)} of {len(agree)} pairs"
+    )
     agg["profile"] = profile
     agg["sad_engine"] = sad_engine()
-    agg["passed"] = bool(all(r <= bar for r in ratios.values()) and better)
+    agg["engines_agree"] = all(agree)
+    agg["passed"] = bool(all(r <= bar for r in ratios.values()) and better and all(agree))
     return agg, all_rows, pairs_256
 
 
