@@ -352,7 +352,7 @@ def _engine_class(name: str) -> type:
         return FusedEngine
     if name == "opencv":
         return Engine
-    raise ValueError(f"NAV_STEREO_ENGINE={name!r}: use 'fused' or 'opencv'")
+    raise ValueError(f"SAD engine {name!r} (NAV_STEREO_ENGINE or engine=): use 'fused' or 'opencv'")
 
 
 def _split_rows(window: RowWindow, v0: int, v1: int, n_parts: int) -> list[tuple[int, int]]:

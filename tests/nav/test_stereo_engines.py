@@ -126,7 +126,8 @@ def test_engine_choice_is_checked(monkeypatch: pytest.MonkeyPatch) -> None:
     left, right = pair.left, pair.right
     monkeypatch.setattr(pipeline_mod._THREAD, "pipelines", {}, raising=False)
     monkeypatch.setattr(pipeline_mod, "SAD_ENGINE", "fast")
-    with pytest.raises(ValueError, match="NAV_STEREO_ENGINE='fast': use 'fused' or 'opencv'"):
+    typo = r"SAD engine 'fast' \(NAV_STEREO_ENGINE or engine=\): use 'fused' or 'opencv'"
+    with pytest.raises(ValueError, match=typo):
         compute_disparity(left, right)
     monkeypatch.setattr(pipeline_mod, "SAD_ENGINE", "fused")
     monkeypatch.setattr(pipeline_mod, "FusedEngine", None)
