@@ -149,5 +149,5 @@ def test_engine_argument_picks_the_engine_per_call() -> None:
     params = StereoParams()
     assert isinstance(pipeline_mod._pipeline(pair.left.shape, params, "opencv").engine, pipeline_mod.Engine)
     assert isinstance(pipeline_mod._pipeline(pair.left.shape, params, "fused").engine, pipeline_mod.FusedEngine)
-    with pytest.raises(ValueError, match="'cuda': use 'fused' or 'opencv'"):
+    with pytest.raises(ValueError, match="SAD engine 'cuda'.*use 'fused' or 'opencv'"):
         compute_disparity(pair.left, pair.right, engine="cuda")
