@@ -273,6 +273,29 @@ class KeepOut(_Spec):
     radius_m: float = Field(gt=0.0, le=100.0, description="Halt when the onboard pose comes this close.")
 
 
+# metrics a distribution criterion may bound (read from metrics.json: rover_sim.bench.seeded.METRICS)
+DISTRIBUTION_METRICS = ("vo_error_pct", "dr_error_pct", "vo_convergence_pct", "max_slip_pct", "goal_distance_m",
+                        "false_positives", "distance_m")  # fmt: skip
+
+
+class DistributionSpec(_Spec):
+    """``[pass.distribution]``: criteria over seeds (``bench suite --seeds``): at least ``min_pass_rate`` of the
+    seeds meet the per-run criteria (default: ``acceptance.DEFAULT_MIN_PASS_RATE``) and every bound holds."""
+
+    min_pass_rate: float | None = Field(None, ge=0.0, le=1.0, description="Fraction of seeds that must pass.")
+    max_median: dict[str, float] = Field(default_factory=dict, description="metric -> upper bound of its median")
+    min_median: dict[str, float] = Field(default_factory=dict, description="metric -> lower bound of its median")
+    max_p90: dict[str, float] = Field(default_factory=dict, description="metric -> upper bound of its 90th pct")
+
+    @model_validator(mode="after")
+    def _known_metrics(self) -> DistributionSpec:
+        for table in ("max_median", "min_median", "max_p90"):
+            for key in getattr(self, table):
+                if key not in DISTRIBUTION_METRICS:
+                    raise ValueError(f"{table}: unknown metric {key!r} (allowed: {', '.join(DISTRIBUTION_METRICS)})")
+        return self
+
+
 class PassSpec(_Spec):
     """The scenario's pass criterion; every set bound must hold."""
 
@@ -305,6 +328,8 @@ class PassSpec(_Spec):
     min_final_slip_pct: float | None = Field(
         None, ge=0.0, le=500.0, description="Slip over the last metre of commanded wheel travel (truth)."
     )
+
+    distribution: DistributionSpec = Field(default_factory=DistributionSpec)
 
     def judges_wheels(self) -> bool:
         """True when a criterion needs the end-of-run wheel metrics (``metrics.extra["wheels"]``)."""
@@ -343,6 +368,9 @@ class PhysicsSpec(_Spec):
     deformable: bool = Field(
         False, description="Ruts, berms and multipass in the heightfield (opt-in); needs 'wong_reece'."
     )
+    perturb_size: float = Field(0.0, ge=0.0, le=0.01, description="A seeded 'butterfly' added to the settled "
+                                "rover: metres and radians, seeded directions (another CPU or build).")  # fmt: skip
+    perturb_seed: int = Field(0, ge=0, le=2**31 - 1, description="Seed of the perturbation's directions.")
 
     @model_validator(mode="after")
     def _deformable_needs_wong_reece(self) -> PhysicsSpec:

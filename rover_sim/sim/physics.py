@@ -279,6 +279,18 @@ class RoverSim:
         if settle_s > 0:
             self.step_for(settle_s)
 
+    def nudge(self, displacement_m: np.ndarray, rotation_vector_rad: np.ndarray) -> None:
+        """Move the rover body by ``displacement_m`` (world frame) and turn it by ``rotation_vector_rad`` (axis times
+        angle, world frame), velocities kept: a tiny change of the initial state (``physics.perturb_size``)."""
+        q = np.zeros(4)
+        mujoco.mju_axisAngle2Quat(q, rotation_vector_rad / max(np.linalg.norm(rotation_vector_rad), 1e-300),
+                                  float(np.linalg.norm(rotation_vector_rad)))  # fmt: skip
+        turned = np.zeros(4)
+        mujoco.mju_mulQuat(turned, q, self.data.qpos[3:7].copy())
+        self.data.qpos[0:3] += np.asarray(displacement_m, float)
+        self.data.qpos[3:7] = turned / np.linalg.norm(turned)
+        self._forward()
+
     # ------------------------------------------------------------------ commands
     def hold(self) -> None:
         """Park: wheel references stay where the wheels are (the non-back-drivable drives hold them)."""
