@@ -160,6 +160,7 @@ def stack_json(stack: StackResult) -> dict:
             "passed": ok,
             "reason": why,
             "criteria": acceptance.describe(r.scenario.passing),
+            "cell_size_m": r.scenario.terrain.cell_size_m,
             "metrics": {k: s.as_json() for k, s in r.summaries().items()},
             "per_seed_verdicts": {str(s): {"passed": p, "reason": w} for s, (p, w) in r.run_verdicts().items()},
         }

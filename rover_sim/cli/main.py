@@ -279,6 +279,23 @@ SchedulerOpt = Annotated[
 ]
 
 
+@bench_app.command("report")
+def bench_report_cmd(
+    path: Annotated[Path, typer.Argument(help="A `bench suite --json` or `bench vo --json` file.")],
+) -> None:
+    """Print a benchmark JSON as markdown tables (median [90 % CI] per figure), with seeds, profile, cell size and
+    machine: the docs' benchmark pages are made this way from committed JSON."""
+    import json as _json
+
+    from rover_sim.bench.report import markdown
+
+    try:
+        data = _json.loads(path.read_text())
+        typer.echo(markdown(data))
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        _fail(ValueError(f"{path}: not a bench suite/vo JSON ({type(e).__name__}: {e})"))
+
+
 @bench_app.command("vo")
 def bench_vo_cmd(
     json: JsonOpt = None,

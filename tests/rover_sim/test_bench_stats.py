@@ -124,3 +124,19 @@ def test_regressed_needs_significance_and_the_floor():
     assert not acceptance.regressed(0.0001, 0.001, math.log(1.05), m)
     two = acceptance.GateMetric("dr_error_pct", "log", floor=0.10, two_sided=True)
     assert acceptance.regressed(0.0001, 0.001, -math.log(1.3), two)
+
+
+def test_report_states_seeds_profile_cell_size_and_machine():
+    from rover_sim.bench.report import markdown
+
+    metric = {"median": 0.5, "mean": 0.6, "ci90": [0.4, 0.7], "worst": 1.0, "per_seed": {"100": 0.5}}
+    data = {"seeds": list(range(100, 108)), "seed_set": "published", "perturb": None,
+            "environment": {"cpu": "Test CPU", "cpus": 2, "python": "3.11", "packages": {"mujoco": "4.0.0"},
+                            "commit": "abc"},
+            "profiles": {"flight": {"scenarios": {"wopmay": {
+                "pass_rate": 1.0, "passed": True, "reason": "all criteria met", "criteria": "VO <= 2 %",
+                "cell_size_m": 0.04, "metrics": {"vo_error_pct": metric}}}}}}  # fmt: skip
+    md = markdown(data)
+    assert "8 seeds (100–107, published set)" in md and "Test CPU" in md and "commit abc" in md
+    assert "**built-in stack, flight profile**" in md and "| wopmay | 0.04 | 1.00 |" in md
+    assert "0.50 [0.40, 0.70]" in md
