@@ -33,9 +33,9 @@ from rover_sim.sim.ephemeris import sun_azimuth_elevation_deg
 from rover_sim.sim.world import Sun
 from terrains import Terrain, albedo_texture, rock_albedo, synthesize
 from terrains.appearance import MARS_TINT_RGB
+from terrains.regolith import regolith_albedo
 from terrains.stream import StreamedSite, WindowTerrain, albedo_world
 from terrains.terrain import Material
-from terrains.regolith import regolith_albedo
 
 FINE_PER_PX = 5  # fine samples per image pixel a side (0.05 m at 0.25 m/pixel)
 DN_MEAN = 4000.0  # counts of the mean signal (14-bit range 0-16383)
@@ -118,7 +118,8 @@ class SiteSampler:
             ground = s.relief_m(X, Y)
             tx0, ty0 = s.tile_of(float(xs[0]), float(ys[0]))
             tx1, ty1 = s.tile_of(float(xs[-1]), float(ys[-1]))
-            rocks = [r for tx in range(tx0 - 1, tx1 + 2) for ty in range(ty0 - 1, ty1 + 2) for r in s.tile(tx, ty).rocks]
+            tiles = [(tx, ty) for tx in range(tx0 - 1, tx1 + 2) for ty in range(ty0 - 1, ty1 + 2)]
+            rocks = [r for tx, ty in tiles for r in s.tile(tx, ty).rocks]
             step = float(xs[1] - xs[0])
             mats = np.full(ground.shape, int(Material.SAND), dtype=np.uint8)
             ox, oy = 0.5 * (xs[0] + xs[-1]), 0.5 * (ys[0] + ys[-1])

@@ -1,0 +1,54 @@
+"""A navcam panorama at a stop, as a global localiser receives it: rectified pairs with their calibrated rigs, and
+the onboard attitude (IMU roll and pitch after standing, the onboard yaw).
+
+The pairs come from the rock survey's panorama acquisition (:meth:`rover_sim.mission.survey.RockSiteSurvey.
+panorama_pair`: the scenario's sensor profile, true lenses and CCD chain, rectified on board with the calibrated
+models at the commanded pointing), so a global fix and a rock site see the same images.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nav.geometry import quat_wxyz_to_R
+from nav.globalloc import PanoramaView
+from rover_sim.mission.survey import MAST_SETTLE_S, REST_BEFORE_PANORAMA_S, RockSiteSurvey
+
+PAN_STEP_DEG = 45.0  # eight pairs cover 360 deg with the navcam's 45 deg field of view
+ELEVATION_DEG = -12.0  # the frames span ~2.5 m from the mast to the horizon
+
+
+def pans_deg(step_deg: float = PAN_STEP_DEG) -> list[float]:
+    n = max(1, int(round(360.0 / step_deg)))
+    return [-180.0 + (360.0 / n) * (k + 0.5) for k in range(n)]
+
+
+def take_panorama(survey: RockSiteSurvey, elevation_deg: float = ELEVATION_DEG) -> list[PanoramaView]:
+    """Stand (suspension settles, the dead reckoner re-levels), then a pair at every pan; mast back after."""
+    m = survey.mission
+    m.stand(REST_BEFORE_PANORAMA_S)
+    views = []
+    for pan in pans_deg():
+        m.point_mast(pan, elevation_deg, settle_s=MAST_SETTLE_S)
+        pair = survey.panorama_pair()
+        views.append(PanoramaView(pair.left_u8, pair.right_u8, pair.rig))
+    m.point_mast(survey.sc.nav.mast_pan_deg, survey.sc.nav.mast_tilt_deg)
+    return views
+
+
+def onboard_attitude(survey: RockSiteSurvey, yaw_rad: float) -> np.ndarray:
+    """The onboard attitude estimate (roll, pitch from the dead reckoner at rest) turned to heading ``yaw_rad``."""
+    R = np.asarray(survey.mission.onboard.pose.R_world_rover, dtype=float)
+    own = math.atan2(R[1, 0], R[0, 0])
+    c, s = math.cos(yaw_rad - own), math.sin(yaw_rad - own)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
+
+
+def true_pose_xy_yaw(survey: RockSiteSurvey) -> np.ndarray:
+    """Ground truth (evaluation only): x, y, yaw of the rover."""
+    sim = survey.mission.sim
+    R = quat_wxyz_to_R(sim.quat_wxyz())
+    p = sim.position_m()
+    return np.array([p[0], p[1], math.atan2(R[1, 0], R[0, 0])])
