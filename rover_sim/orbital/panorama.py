@@ -25,6 +25,16 @@ def pans_deg(step_deg: float = PAN_STEP_DEG) -> list[float]:
     return [-180.0 + (360.0 / n) * (k + 0.5) for k in range(n)]
 
 
+def place_rover(survey: RockSiteSurvey, x_m: float, y_m: float, yaw_rad: float) -> None:
+    """Put the rover at a stop (the bench's stops are independent: no drive between them) and let it settle. The
+    simulation clock keeps running forward (the sensors' samples stay in time order)."""
+    sim = survey.mission.sim
+    t_s = sim.time_s
+    sim.place(x_m, y_m, yaw_rad, settle_s=0.0)
+    sim.data.time = t_s
+    survey.mission.stand(1.5)
+
+
 def take_panorama(survey: RockSiteSurvey, elevation_deg: float = ELEVATION_DEG) -> list[PanoramaView]:
     """Stand (suspension settles, the dead reckoner re-levels), then a pair at every pan; mast back after."""
     m = survey.mission
