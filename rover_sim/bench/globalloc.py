@@ -154,8 +154,9 @@ def run_stop(localizer: object, stop: Stop, omap: OrbitalMap) -> StopResult:
         return StopResult(stop.terrain, stop.seed, stop.index, prior_err, False, None, None, None, cpu, res.reason)
     xy = np.asarray(res.xy_yaw, float)
     sig = float(math.sqrt(max(np.linalg.eigvalsh(np.asarray(res.covariance)[:2, :2]).max(), 0.0)))
-    return StopResult(stop.terrain, stop.seed, stop.index, prior_err, True, float(np.hypot(*(xy[:2] - stop.truth_xy_yaw[:2]))),
-                      wrap_deg(xy[2] - stop.truth_xy_yaw[2]), sig, cpu, "")  # fmt: skip
+    err = float(np.hypot(*(xy[:2] - stop.truth_xy_yaw[:2])))
+    return StopResult(stop.terrain, stop.seed, stop.index, prior_err, True, err, wrap_deg(xy[2] - stop.truth_xy_yaw[2]),
+                      sig, cpu, "")  # fmt: skip
 
 
 def summarise(rows: list[StopResult]) -> dict:
@@ -191,8 +192,8 @@ def bench_globalloc(
     terrains = list(terrains or TERRAINS)
     rows: dict[str, list[StopResult]] = {n: [] for n in names}
     load = os.getloadavg()
-    for terrain in terrains:
-        for seed in seeds:
+    for seed in seeds:  # seed-major: an interrupted run has seen every terrain
+        for terrain in terrains:
             omap, stops = acquire_site(terrain, seed, stops_per_seed, Path(cache))
             for stop in stops:
                 for n, impl in impls.items():

@@ -93,7 +93,8 @@ def instantiate(kind: str, spec: str, params: object | None = None) -> Any:
         raise PluginError(spec, "constructor", f"{type(err).__name__}: {err}") from None
     protocol = PROTOCOLS[kind]
     if not isinstance(obj, protocol):
-        missing = [m for m in ("reset", "step", "disparity", "arcs", "localize") if hasattr(protocol, m) and not hasattr(obj, m)]
+        methods = ("reset", "step", "disparity", "arcs", "localize")
+        missing = [m for m in methods if hasattr(protocol, m) and not hasattr(obj, m)]
         raise PluginError(
             spec,
             "protocol",
