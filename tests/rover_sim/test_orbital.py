@@ -71,3 +71,20 @@ def test_streamed_site_gives_tiles_along_the_route():
     assert sc.terrain.streamed is not None and len(boxes) > 1
     xs = [b.x0_m for b in boxes]
     assert max(xs) - min(xs) > 100.0  # along the route, not a square around the start
+
+
+def test_cli_writes_products_and_refuses_a_bad_field(tmp_path):
+    from typer.testing import CliRunner
+
+    from rover_sim.cli.main import app
+
+    toml = tmp_path / "tiny.toml"
+    toml.write_text('name = "tiny"\n[terrain]\nsize_m = [12, 12]\ncell_size_m = 0.1\n[terrain.rocks]\n'
+                    'cover_fraction = 0.02\n[[commands]]\ntype = "drive"\ndistance_m = 0.1\n')  # fmt: skip
+    out = tmp_path / "orb"
+    res = CliRunner().invoke(app, ["orbital", str(toml), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert {p.name for p in out.iterdir()} >= {"ortho.png", "ortho.pgw", "dem.tif", "dem.tfw", "orbital.json"}
+    res = CliRunner().invoke(app, ["orbital", str(toml), "--out", str(tmp_path / "x"), "--set",
+                                   "orbital.dem_sigma_m=-1"])  # fmt: skip
+    assert res.exit_code == 2 and "orbital.dem_sigma_m" in res.output
