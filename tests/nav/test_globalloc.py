@@ -24,14 +24,14 @@ def orbital(values: np.ndarray) -> OrbitalMap:
     return OrbitalMap(img, dem, np.array([0.5, 0.0, -0.86]), 0.25, 0.0, 0.0, 0.5)
 
 
-def textured(seed: int, n: int = 640) -> np.ndarray:
+def textured(seed: int, n: int = 400) -> np.ndarray:
     rng = np.random.default_rng(seed)
     return 1000.0 + 60.0 * gaussian_filter(rng.normal(size=(n, n)), 1.2)
 
 
 def local_points(omap: OrbitalMap, truth: np.ndarray, rng: np.random.Generator, noise: float = 0.02) -> LocalPoints:
     """Points on a ring 3-24 m around ``truth`` in the prior-yaw level frame, grey from the map (plus noise)."""
-    r = np.sqrt(rng.uniform(3.0**2, 24.0**2, 200_000))
+    r = np.sqrt(rng.uniform(3.0**2, 24.0**2, 100_000))
     a = rng.uniform(-math.pi, math.pi, r.size)
     xy_site = np.c_[r * np.cos(a), r * np.sin(a)]
     grey = omap.image.sample(truth[0] + xy_site[:, 0], truth[1] + xy_site[:, 1])
@@ -55,7 +55,7 @@ def test_fix_on_textured_map_is_within_a_pixel():
 def test_refuses_featureless_map():
     """Orbital image of pure sensor noise, local map of independent noise: nothing to match, so no fix."""
     rng = np.random.default_rng(2)
-    omap = orbital(1000.0 + 10.0 * rng.normal(size=(640, 640)))
+    omap = orbital(1000.0 + 10.0 * rng.normal(size=(400, 400)))
     pts = LocalPoints(np.c_[rng.uniform(-24, 24, (100_000, 2)), np.zeros(100_000)], 1 + 0.01 * rng.normal(size=100_000))
     res = OrbitalLocalizer().match(pts, np.array([0.0, 0.0, 0.0]), COV, omap)
     assert res.status != "ok"
@@ -63,7 +63,7 @@ def test_refuses_featureless_map():
 
 def test_refuses_periodic_stripes():
     """Straight dunes: the local map fits every crest along the stripes equally well."""
-    n = 640
+    n = 400
     x = (np.arange(n) - n / 2) * PX
     stripes = 1000.0 + 60.0 * np.sin(2 * math.pi * x / 6.0)[None, :].repeat(n, axis=0)
     rng = np.random.default_rng(3)
