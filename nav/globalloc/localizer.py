@@ -124,6 +124,7 @@ class OrbitalLocalizer:
         n_hyp = max(vol.size / lobe, 1.0)
         diag = dict(peak=pk.score, second=second, median=med, mad=mad, n_eff=n_eff, lobe_px=lobe, n_cells=n_valid,
                     n_hypotheses=n_hyp, second_at_m=float(np.hypot(where2[1] - pk.r, where2[2] - pk.c) * px))
+        diag["candidate_xy_yaw"] = [float(v) for v in xy_yaw]  # the best hypothesis, also when refused
         cov_fix = self.covariance(pk, n_eff, px, orbital)
         diag["sigma_major_m"] = float(math.sqrt(max(np.linalg.eigvalsh(cov_fix[:2, :2]).max(), 0.0)))
         dem_chi2 = self.dem_check(pts, xy_yaw, prior, orbital)

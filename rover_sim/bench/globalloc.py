@@ -58,6 +58,7 @@ class StopResult:
     sigma_m: float | None
     compute_s: float
     reason: str
+    candidate_error_m: float | None = None  # the refused best hypothesis's error (None: the localiser gave none)
 
 
 def draw_prior(seed: int, index: int, truth: np.ndarray) -> np.ndarray:
@@ -151,7 +152,11 @@ def run_stop(localizer: object, stop: Stop, omap: OrbitalMap) -> StopResult:
     cpu = time.process_time() - t0
     prior_err = float(np.hypot(*(stop.prior_xy_yaw[:2] - stop.truth_xy_yaw[:2])))
     if res.status != "ok":
-        return StopResult(stop.terrain, stop.seed, stop.index, prior_err, False, None, None, None, cpu, res.reason)
+        cand = getattr(res, "diagnostics", {}).get("candidate_xy_yaw")
+        t = stop.truth_xy_yaw
+        cand_err = None if cand is None else float(np.hypot(cand[0] - t[0], cand[1] - t[1]))
+        return StopResult(stop.terrain, stop.seed, stop.index, prior_err, False, None, None, None, cpu, res.reason,
+                          cand_err)  # fmt: skip
     xy = np.asarray(res.xy_yaw, float)
     sig = float(math.sqrt(max(np.linalg.eigvalsh(np.asarray(res.covariance)[:2, :2]).max(), 0.0)))
     err = float(np.hypot(*(xy[:2] - stop.truth_xy_yaw[:2])))
