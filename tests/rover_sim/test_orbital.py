@@ -88,3 +88,13 @@ def test_cli_writes_products_and_refuses_a_bad_field(tmp_path):
     res = CliRunner().invoke(app, ["orbital", str(toml), "--out", str(tmp_path / "x"), "--set",
                                    "orbital.dem_sigma_m=-1"])  # fmt: skip
     assert res.exit_code == 2 and "orbital.dem_sigma_m" in res.output
+
+
+@pytest.mark.slow
+def test_streamed_tile_products_are_made_from_world_coordinates():
+    from rover_sim.orbital.products import Box
+
+    sc = load_scenario("spirit_plains_sol")
+    omap, _ = make_products(sc, Box(10.125, -9.875, 16.0, 16.0))
+    assert omap.image.shape == (64, 64) and omap.dem.shape == (16, 16)
+    assert np.all(np.isfinite(omap.dem.values)) and omap.image.values.std() > 0
