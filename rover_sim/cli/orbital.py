@@ -62,6 +62,7 @@ def bench_globalloc_cmd(
     terrain: Annotated[list[str] | None, typer.Option("--terrain", help="Only these terrain types.")] = None,
     stops: Annotated[int, typer.Option("--stops", min=1, max=50, help="Stops per seed.")] = 5,
     cache: Annotated[Path, typer.Option("--cache", help="Panorama cache directory.")] = Path("runs/globalloc_cache"),
+    junit: Annotated[Path | None, typer.Option("--junit", help="Write JUnit XML (one case per localiser).")] = None,
 ) -> None:
     """Global localisation against orbital products over rocky plains, a crater rim, a dune field and a
     featureless plain (flight profile): per-terrain fixes, refusals, false fixes, errors and compute."""
@@ -75,6 +76,14 @@ def bench_globalloc_cmd(
             if t not in TERRAINS:
                 raise ConfigError("--terrain", t, f"unknown terrain; one of {', '.join(TERRAINS)}")
         result = bench_globalloc(str(json) if json else None, localizer, seed_list, terrain, stops, cache)
+    if junit:
+        from rover_sim.cli.status import finish
+        from rover_sim.io.junit import case
+
+        cases = [case(name, "bench.globalloc", not [r for r in result["reasons"] if r.startswith(f"{name}: ")],
+                      "; ".join(r for r in result["reasons"] if r.startswith(f"{name}: ")))
+                 for name in result["localizers"]]  # fmt: skip
+        finish(str(junit), "bench globalloc", cases)
     exit_with(ExitStatus.OK if result["passed"] else ExitStatus.FAILED)
 
 
