@@ -80,7 +80,7 @@ def acquire_site(terrain: str, seed: int, n_stops: int, cache: Path, progress=pr
         return load_site(path)
     from rover_sim.mission.scenario import scenario_from_dict
     from rover_sim.mission.survey import RockSiteSurvey, SurveyConfig
-    from rover_sim.orbital.panorama import onboard_attitude, place_rover, take_panorama, true_pose_xy_yaw
+    from rover_sim.orbital.panorama import gentle_spot, onboard_attitude, place_rover, take_panorama, true_pose_xy_yaw
     from rover_sim.orbital.products import make_products, site_boxes
 
     xyyaw = stops_xy_yaw(seed, n_stops)
@@ -93,6 +93,7 @@ def acquire_site(terrain: str, seed: int, n_stops: int, cache: Path, progress=pr
     with RockSiteSurvey(sc, cfg) as survey:
         for k, (x, y, yaw) in enumerate(xyyaw):
             t0 = time.perf_counter()
+            x, y = gentle_spot(survey.terrain, float(x), float(y))  # the rover parks on gentle ground
             place_rover(survey, float(x), float(y), float(yaw))
             views = take_panorama(survey)
             truth = true_pose_xy_yaw(survey)

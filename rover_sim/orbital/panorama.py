@@ -25,6 +25,24 @@ def pans_deg(step_deg: float = PAN_STEP_DEG) -> list[float]:
     return [-180.0 + (360.0 / n) * (k + 0.5) for k in range(n)]
 
 
+MAX_PARK_SLOPE_DEG = 12.0  # the rover parks on gentle ground (a ripple's lee face would not hold it)
+
+
+def gentle_spot(terrain: object, x_m: float, y_m: float, max_slope_deg: float = MAX_PARK_SLOPE_DEG,
+                search_m: float = 2.5) -> tuple[float, float]:  # fmt: skip
+    """The point nearest ``(x_m, y_m)`` (within ``search_m``, 0.25 m steps) where the ground under the rover's
+    footprint is gentler than ``max_slope_deg``; the point itself if none is."""
+    ring = np.linspace(0.0, 2.0 * math.pi, 12, endpoint=False)
+    offsets = [(0.0, 0.0)] + [(r * math.cos(a), r * math.sin(a)) for r in np.arange(0.25, search_m + 1e-9, 0.25)
+                              for a in ring]  # fmt: skip
+    foot = np.array([[0.0, 0.0], [0.6, 0.6], [0.6, -0.6], [-0.6, 0.6], [-0.6, -0.6]])
+    for dx, dy in offsets:
+        px, py = x_m + dx + foot[:, 0], y_m + dy + foot[:, 1]
+        if float(np.max(terrain.slope_deg_at(px, py))) < max_slope_deg:  # type: ignore[attr-defined]
+            return x_m + dx, y_m + dy
+    return x_m, y_m
+
+
 def place_rover(survey: RockSiteSurvey, x_m: float, y_m: float, yaw_rad: float) -> None:
     """Put the rover at a stop (the bench's stops are independent: no drive between them) and let it settle. The
     simulation clock keeps running forward (the sensors' samples stay in time order)."""
