@@ -73,12 +73,31 @@ class SweepBar:
     max_parallel_ratio: float = 0.65
 
 
+@dataclass(frozen=True)
+class GlobalLocBar:
+    """``bench globalloc``: on rocky plains and crater rims >= 95 % of stops fixed within ``false_fix_m``, median
+    error <= 0.25 m, 90th percentile <= 0.5 m, <= 30 s of CPU per fix (Perseverance's Mars Global Localization:
+    ~25 cm in ~2 min); on every terrain no false fix (accepted and more than 1 m off); >= 40 stops over >= 8 seeds
+    per terrain."""
+
+    fixed_terrains: tuple[str, ...] = ("rocky_plains", "crater_rim")
+    min_fixed_frac: float = 0.95
+    max_median_error_m: float = 0.25
+    max_p90_error_m: float = 0.5
+    max_false_fixes: int = 0
+    false_fix_m: float = 1.0
+    max_compute_s: float = 30.0
+    min_stops: int = 40
+    min_seeds: int = 8
+
+
 AUTONAV = AutonavBar()
 STEREO = StereoBar()
 RENDER = RenderBar()
 DIMES = DimesBar()
 ROCKS = RocksBar()
 SWEEP = SweepBar()
+GLOBALLOC = GlobalLocBar()
 
 
 def describe(p: PassSpec) -> str:
@@ -288,3 +307,28 @@ def regressed(p_value: float, threshold: float, effect: float, metric: GateMetri
     size = abs(effect) if metric.two_sided else effect
     floor = math.log1p(metric.floor) if metric.scale == "log" else metric.floor
     return p_value <= threshold and size >= floor
+
+
+def judge_globalloc(terrains: dict[str, dict], bar: GlobalLocBar = GLOBALLOC) -> tuple[bool, list[str]]:
+    """``bench globalloc``'s verdict on one localiser's per-terrain summaries (``stops``, ``fixed``, ``success``,
+    ``false_fixes``, ``median_error_m``, ``p90_error_m``, ``compute_s_median``, ``seeds``)."""
+    reasons = []
+    for name, b in terrains.items():
+        if b["stops"] < bar.min_stops or len(b.get("seeds", [])) < bar.min_seeds:
+            reasons.append(f"{name}: {b['stops']} stops over {len(b.get('seeds', []))} seeds "
+                           f"(need >= {bar.min_stops} over >= {bar.min_seeds})")  # fmt: skip
+        if b["false_fixes"] > bar.max_false_fixes:
+            reasons.append(f"{name}: {b['false_fixes']} false fixes (> {bar.false_fix_m} m off; allowed 0)")
+        if b["compute_s_median"] is not None and b["compute_s_median"] > bar.max_compute_s:
+            reasons.append(f"{name}: median compute {b['compute_s_median']:.1f} s > {bar.max_compute_s} s")
+        if name not in bar.fixed_terrains:
+            continue
+        frac = b["success"] / max(b["stops"], 1)
+        if frac < bar.min_fixed_frac:
+            reasons.append(f"{name}: {100 * frac:.0f} % of stops fixed within {bar.false_fix_m} m "
+                           f"(< {100 * bar.min_fixed_frac:.0f} %)")  # fmt: skip
+        for key, lim in (("median_error_m", bar.max_median_error_m), ("p90_error_m", bar.max_p90_error_m)):
+            v = b[key]
+            if v is None or v > lim:
+                reasons.append(f"{name}: {key} {'not measured' if v is None else f'{v:.3f}'} (> {lim})")
+    return not reasons, reasons

@@ -20,6 +20,7 @@ from nav.stereo import StereoParams
 from nav.vo import SanityConstraints, VoParams
 from rover_sim.errors import ConfigError
 from rover_sim.mission.sensors_spec import SensorsSpec
+from rover_sim.orbital.spec import OrbitalSpec
 from rover_sim.resources import scenarios_dir
 from rover_sim.sim.ephemeris import sun_azimuth_elevation_deg
 from terrains import TerrainRecipe
@@ -399,6 +400,7 @@ class Scenario(_Spec):
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
     fast: bool = Field(False, description="Part of the fast CI suite.")
     sol: SolSpec | None = Field(None, description="Drive-time and distance budgets of a sol's drive (issue #18).")
+    orbital: OrbitalSpec = Field(default_factory=OrbitalSpec, description="Orbital products' error model.")
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)
 
