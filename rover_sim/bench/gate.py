@@ -127,14 +127,20 @@ def check_power(n_seeds: int, n_tests: int) -> None:
                           f"{stats.min_attainable_p(n_seeds, 'two-sided'):.2g} (use more seeds)")  # fmt: skip
 
 
-def compare(current: dict[str, dict[str, PerSeed]], baseline: Baseline) -> dict[str, dict[str, Regression]]:
-    """Every gated scenario x metric of ``current`` (scenario -> metric -> per seed) against ``baseline``."""
+def compare(
+    current: dict[str, dict[str, PerSeed]], baseline: Baseline, replayed: bool = False
+) -> dict[str, dict[str, Regression]]:
+    """Every gated scenario x metric of ``current`` (scenario -> metric -> per seed) against ``baseline``. For a VO
+    replayed on the baseline stack's inputs (``replayed``) the family holds only the metrics an estimator can change
+    (``GateMetric.estimator``): dead reckoning and the route are the recorded run's by construction."""
     tests: list[tuple[str, GateMetric, list[int], np.ndarray]] = []
     for sc, metrics in current.items():
         base = baseline.values.get(sc)
         if base is None:
             continue
         for m in GATE.metrics:
+            if replayed and not m.estimator:
+                continue
             if m.key not in base or m.key not in metrics:
                 continue
             seeds, d = paired_differences(m, metrics[m.key], base[m.key])

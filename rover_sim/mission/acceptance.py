@@ -278,6 +278,7 @@ class GateMetric:
     worse: str = "higher"  # "higher" | "lower"
     offset: float = 0.0
     two_sided: bool = False
+    estimator: bool = True  # a visual odometer replayed on the same inputs can change it (DR and the route it cannot)
 
 
 @dataclass(frozen=True)
@@ -293,8 +294,8 @@ class GateBar:
     metrics: tuple[GateMetric, ...] = (
         GateMetric("vo_error_pct", "log", floor=0.10, offset=0.05),
         GateMetric("vo_convergence_pct", "identity", floor=5.0, worse="lower"),
-        GateMetric("dr_error_pct", "log", floor=0.10, offset=0.05, two_sided=True),
-        GateMetric("goal_distance_m", "log", floor=0.25, offset=0.1),
+        GateMetric("dr_error_pct", "log", floor=0.10, offset=0.05, two_sided=True, estimator=False),
+        GateMetric("goal_distance_m", "log", floor=0.25, offset=0.1, estimator=False),
     )
 
 

@@ -3,7 +3,9 @@
 Each wraps MER VO (``nav.vo.VisualOdometry``) and adds one defect a real estimator could have:
 
 - :class:`ScaleErrorVO`: every accepted translation 1 % too long (a stereo baseline or focal length error);
-- :class:`YawBiasVO`: every accepted step turned 0.05 deg further left (a gyro-like heading bias per step);
+- :class:`YawBiasVO`: a heading that drifts 0.05 deg per accepted step, each step's motion reported in that drifting
+  frame (rotation and translation). MER's position-only update ignores a VO's rotation, so a bias in the rotation
+  alone would be harmless by design; a VO that integrates its own heading turns its translations with it;
 - :class:`EchoDeadReckoningVO`: reports the dead-reckoned prediction as its measurement (VO that measures nothing);
 - :class:`RefuseAllVO`: refuses every step (VO that never converges).
 """
@@ -44,11 +46,25 @@ class ScaleErrorVO(_Wrapped):
         return T
 
 
+def _rz(angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
 class YawBiasVO(_Wrapped):
+    def __init__(self, params=None):  # noqa: ANN001
+        super().__init__(params)
+        self.steps = 0  # accepted steps since the last reset: the drift so far
+
+    def reset(self) -> None:
+        super().reset()
+        self.steps = 0
+
     def distort(self, T: np.ndarray) -> np.ndarray:
-        a = math.radians(YAW_BIAS_DEG_PER_STEP)
-        Rz = np.array([[math.cos(a), -math.sin(a), 0.0], [math.sin(a), math.cos(a), 0.0], [0.0, 0.0, 1.0]])
-        T[:3, :3] = T[:3, :3] @ Rz
+        self.steps += 1
+        bias = math.radians(YAW_BIAS_DEG_PER_STEP)
+        T[:3, :3] = T[:3, :3] @ _rz(bias)
+        T[:3, 3] = _rz(bias * self.steps) @ T[:3, 3]
         return T
 
 
