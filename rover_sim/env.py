@@ -246,8 +246,8 @@ class RoverEnv(gymnasium.Env):
     def _build_world(self, world_seed: int) -> None:
         from rover_sim.mission.calibration import RunCalibration, build_true_lens
         from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+        from rover_sim.sim.assembly import Sun
         from rover_sim.sim.physics import RoverSim
-        from rover_sim.sim.world import Sun
         from terrains import synthesize
 
         self._close_world()

@@ -233,7 +233,7 @@ def render_cmd(
 
     from rover_sim.bench.render import HAZCAM_PAIRS, render_to_dir
     from rover_sim.mission.scenario import load_scenario
-    from rover_sim.sim.world import Sun
+    from rover_sim.sim.assembly import Sun
 
     pairs = ("navcam", *HAZCAM_PAIRS)
     if pair not in pairs:

@@ -62,7 +62,7 @@ from rover_sim.mission.descent_scene import (  # noqa: F401 - the scene's names 
     descent_model,
 )
 from rover_sim.render.renderer import ImageNoise
-from rover_sim.sim.world import Sun
+from rover_sim.sim.assembly import Sun
 from terrains import (
     CraterSpec,
     MaterialSpec,

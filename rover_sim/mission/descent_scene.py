@@ -19,7 +19,7 @@ from nav.camera import PinholeCamera
 from nav.geometry import R_to_quat_wxyz
 from rover_sim.render.cameras import MJ_TO_CV
 from rover_sim.render.renderer import LUMA_WEIGHTS, ImageNoise, bin_average, check_gl, quantise
-from rover_sim.sim.world import Sun, hfield_encoding
+from rover_sim.sim.assembly import Sun, hfield_encoding
 
 if TYPE_CHECKING:
     from terrains import Terrain

@@ -25,10 +25,10 @@ from rover_sim.mission.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
 from rover_sim.mission.observation import Observation, StereoImages
 from rover_sim.mission.scenario import Scenario
 from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoFrame, StereoRenderer, terrain_texture
+from rover_sim.sim.assembly import Sun
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.sensors import OdometryErrors, SensorSuite
 from rover_sim.sim.stream import TerrainStreamer
-from rover_sim.sim.world import Sun
 from terrains import Terrain, synthesize, texture_rgb_u8
 
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB

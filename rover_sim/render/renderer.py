@@ -61,8 +61,8 @@ from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles
     add_terrain_tiles,
 )
 from rover_sim.render.window import ROCK_MATERIAL, follow_window, rock_rgba, slot_box
+from rover_sim.sim.assembly import ROCK_GEOM_PREFIX
 from rover_sim.sim.stream import release_freed_memory
-from rover_sim.sim.world import ROCK_GEOM_PREFIX
 
 if TYPE_CHECKING:
     from rover_sim.sim.physics import RoverSim
@@ -231,7 +231,7 @@ def _rock_appearance(spec: mujoco.MjSpec, terrain: Terrain) -> tuple[list[str], 
     for i, rock in enumerate(terrain.rocks):
         name = f"{ROCK_GEOM_PREFIX}{i:04d}"
         mesh = spec.mesh(name)
-        if mesh is None:  # a streamed rock slot: an ellipsoid primitive (sim/world.py), boxed by its footprint
+        if mesh is None:  # a streamed rock slot: an ellipsoid primitive (sim/assembly.py), boxed by its footprint
             verts = np.array(slot_box(rock))
         else:
             verts = np.asarray(mesh.uservert, dtype=float).reshape(-1, 3)

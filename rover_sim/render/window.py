@@ -23,7 +23,7 @@ import mujoco
 import numpy as np
 
 from rover_sim.render.tiles import GROUP_HIDDEN, GROUP_SHOWN, tile_meshes, write_tile_meshes
-from rover_sim.sim.world import ROCK_GEOM_PREFIX
+from rover_sim.sim.assembly import ROCK_GEOM_PREFIX
 
 if TYPE_CHECKING:
     from rover_sim.render.renderer import RenderWorld

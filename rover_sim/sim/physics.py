@@ -11,11 +11,11 @@ import numpy as np
 
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
+from rover_sim.sim.assembly import ROCK_GEOM_PREFIX, Sun, build_spec
 from rover_sim.sim.ground_plates import GroundPlates, add_ground_plates
 from rover_sim.sim.soil_kernel import apply_wheel_wrenches, materials_under
 from rover_sim.sim.stream import release_freed_memory
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
-from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 from rover_sim.sim.wr_kernel import wr_wrenches
 
 if TYPE_CHECKING:

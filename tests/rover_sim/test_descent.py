@@ -31,7 +31,7 @@ from rover_sim.mission.descent import (
     simulate_descent,
     with_wind,
 )
-from rover_sim.sim.world import Sun
+from rover_sim.sim.assembly import Sun
 from terrains import Terrain
 
 FLAT_PLAIN = Terrain.from_heights(np.zeros((801, 801)), 4.0)  # 3.2 km at 4 m, for sensor and geometry tests

@@ -14,7 +14,7 @@ from nav.vo.shadow import predict_shadow, vo_feature_mask
 from rover_sim.mission.rover_shape import rover_shape
 from rover_sim.mission.scenario import scenario_from_dict
 from rover_sim.mission.world import World
-from rover_sim.sim.world import Sun
+from rover_sim.sim.assembly import Sun
 
 FIELD = {
     "name": "shadow_probe",

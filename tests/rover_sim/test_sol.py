@@ -16,7 +16,7 @@ from rover_sim.mission.clock import (
 from rover_sim.mission.pipeline import Mission
 from rover_sim.mission.scenario import SolSpec, load_scenario, scenario_from_dict
 from rover_sim.mission.sol import BudgetSpent, SolBudget
-from rover_sim.sim.world import Sun
+from rover_sim.sim.assembly import Sun
 
 
 def test_distance_splits_by_mode_on_the_worlds_clock() -> None:
