@@ -26,11 +26,11 @@ from rover_sim.errors import PhysicsDiverged
 
 if TYPE_CHECKING:
     from nav.rectify import Rectification
-    from rover_sim.mission.calibration import RunCalibration
     from rover_sim.mission.scenario import Scenario
     from rover_sim.render.renderer import StereoRenderer
     from rover_sim.sim.physics import RoverSim
     from rover_sim.sim.sensors import SensorSuite
+    from rover_sim.world.calibration import RunCalibration
 
 GYRO_RANGE_RAD_S = math.radians(1000.0)  # LN-200 class input range: readings saturate here
 ACCEL_RANGE_M_S2 = 40.0 * 9.80665
@@ -101,12 +101,12 @@ class RoverEnv(gymnasium.Env):
 
     **Images and the sensor profile** (``[sensors] profile`` of the scenario, "flight" by default): with "ideal"
     they are the exact pinhole pairs (rectified by construction), ``image_noise`` adding the renderer's simple
-    noise. With "flight" they follow the mission's chain (:class:`rover_sim.mission.world.World`): raw pairs
+    noise. With "flight" they follow the mission's chain (:class:`rover_sim.world.world.World`): raw pairs
     through the true lenses (:mod:`rover_sim.render.lens`, a seeded mounting/calibration draw per world,
-    :class:`~rover_sim.mission.calibration.RunCalibration`) and the CCD image formation
+    :class:`~rover_sim.world.calibration.RunCalibration`) and the CCD image formation
     (:mod:`rover_sim.render.imaging`, always noisy: ``image_noise`` does not apply), the mast stopping within its
     encoder error, then rectified through the *calibrated* models at the commanded pointing
-    (:func:`~rover_sim.mission.calibration.onboard_stereo_models`, :func:`nav.rectify.rectification`, as
+    (:func:`~rover_sim.world.calibration.onboard_stereo_models`, :func:`nav.rectify.rectification`, as
     :meth:`rover_sim.mission.onboard.Onboard.rectified` does), so calibration errors reach a policy as they reached
     MER's stereo and VO (the shapes are the same in both profiles). ``render()`` (``rgb_array``) is a colour pinhole
     view for people, not a sensor: it is the same in both profiles.
@@ -244,10 +244,10 @@ class RoverEnv(gymnasium.Env):
 
     # ------------------------------------------------------------------ world
     def _build_world(self, world_seed: int) -> None:
-        from rover_sim.mission.calibration import RunCalibration, build_true_lens
         from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
         from rover_sim.sim.assembly import Sun
         from rover_sim.sim.physics import RoverSim
+        from rover_sim.world.calibration import RunCalibration, build_true_lens
         from terrains import synthesize
 
         self._close_world()
@@ -425,9 +425,9 @@ class RoverEnv(gymnasium.Env):
     def _point_mast(self, sc: Scenario) -> None:
         """Command the scenario's mast pointing; the mast stops within its encoder error (flight), and the onboard
         rectification of each pair is computed from the calibrated models at the *commanded* pointing (as
-        :meth:`rover_sim.mission.world.World.calibrate` does; none in the ideal profile)."""
+        :meth:`rover_sim.world.world.World.calibrate` does; none in the ideal profile)."""
         from nav.rectify import rectification
-        from rover_sim.mission.calibration import MastEncoders, onboard_stereo_models
+        from rover_sim.world.calibration import MastEncoders, onboard_stereo_models
 
         sim, lens = self._sim, sc.sensors.lens
         pan_deg, elevation_deg = sc.nav.mast_pan_deg, sc.nav.mast_tilt_deg

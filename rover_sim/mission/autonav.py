@@ -19,7 +19,6 @@ import numpy as np
 
 from nav.gestalt import Arc as GestaltArc
 from nav.gestalt import arc_pose
-from rover_sim.mission.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
 from rover_sim.mission.onboard import (  # noqa: F401 (re-exported for callers of the old module)
     MAX_RANGE_M,
     SELF_MASK_HALF_LENGTH_M,
@@ -28,6 +27,7 @@ from rover_sim.mission.onboard import (  # noqa: F401 (re-exported for callers o
     terrain_points,
 )
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
+from rover_sim.world.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
 
 # A sol's drive logs every cycle's hazcam pair but the cycle's detail (depth image, stereo points, goodness map,
 # arc votes: ~100 kB of the ~125 kB a cycle) only every SOL_DETAIL_EVERY-th cycle and on boxed-in cycles, so a
@@ -35,9 +35,9 @@ from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
 SOL_DETAIL_EVERY = 4
 
 if TYPE_CHECKING:
-    from rover_sim.mission.observation import Observation
     from rover_sim.mission.pipeline import Mission
     from rover_sim.mission.scenario import AutonavCmd
+    from rover_sim.world.observation import Observation
 
 HAZCAM = "hazcam_front"
 REAR_HAZCAM = "hazcam_rear"  # imaged too while the rover is backing up (it does not otherwise look behind)

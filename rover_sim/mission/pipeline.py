@@ -29,19 +29,19 @@ from rover_sim.errors import PhysicsDiverged, PluginError
 from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission import acceptance
 from rover_sim.mission.acceptance import TALL_ROCK_M
-from rover_sim.mission.clock import VO_STEP_COMPUTE_S
 from rover_sim.mission.evaluator import Evaluator, Metrics, VoStepRecord
-from rover_sim.mission.observation import Observation
 from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
 from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
 from rover_sim.mission.pointing import seek_texture
-from rover_sim.mission.rover_shape import rover_shape
 from rover_sim.mission.rut_log import RutLog
 from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, SleepCmd, TurnCmd
 from rover_sim.mission.sol import BudgetSpent, SolBudget
-from rover_sim.mission.world import World
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
 from rover_sim.sim.physics import WHEEL_RADIUS_M, RoverSim
+from rover_sim.world.clock import VO_STEP_COMPUTE_S
+from rover_sim.world.observation import Observation
+from rover_sim.world.rover_shape import rover_shape
+from rover_sim.world.world import World
 
 __all__ = ["Halt", "Metrics", "Mission", "TALL_ROCK_M", "VoStepRecord"]
 

@@ -314,7 +314,7 @@ class PassSpec(_Spec):
 
 class SolSpec(_Spec):
     """``[sol]``: the day's drive as MER flew it (issue #18): the commands run until the drive-time budget (mission
-    clock: driving + imaging + computing, ``rover_sim/mission/clock.py``) or the odometry distance budget is spent.
+    clock: driving + imaging + computing, ``rover_sim/world/clock.py``) or the odometry distance budget is spent.
     A drive of several sols separates them with ``sleep`` commands: the budgets apply to each sol, and a sol whose
     budget is spent skips the rest of its commands up to the next ``sleep``. Long drives keep fewer poses
     (``pose_stride``) so memory and the recording grow slowly with distance."""

@@ -198,8 +198,8 @@ def test_flight_panorama_pairs_are_rectified_with_the_calibrated_models() -> Non
     rectified on board with the *calibrated* models at the *commanded* mast pointing (the rig stereo triangulates
     with is the onboard one, not the true cameras); ideal profile: the pinhole pair and its exact rig."""
     from nav.rectify import rectification
-    from rover_sim.mission.calibration import onboard_stereo_models
     from rover_sim.render.lens import TrueLens
+    from rover_sim.world.calibration import onboard_stereo_models
 
     config = SurveyConfig(resolution_px=256)
     d = small_site_scenario().model_dump(mode="json")

@@ -37,10 +37,10 @@ from rover_sim.errors import RoverSimError
 from rover_sim.io.export.base import DatasetWriter, ExportMeta, Frame, Stream
 
 if TYPE_CHECKING:
-    from rover_sim.mission.observation import Observation
     from rover_sim.mission.pipeline import Mission
     from rover_sim.mission.scenario import Scenario
     from rover_sim.render.renderer import StereoFrame, StereoRenderer
+    from rover_sim.world.observation import Observation
 
 __all__ = ["CAMERAS", "FORMATS", "DatasetSink", "DatasetWriter", "ExportOptionError", "ExportSummary", "Frame",
            "check_options", "export_scenario", "make_writer"]  # fmt: skip

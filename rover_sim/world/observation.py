@@ -82,7 +82,7 @@ def require_observation(obj: object, where: str) -> Observation:
     """Return ``obj`` if it is exactly an :class:`Observation`; otherwise refuse (subclasses could smuggle truth)."""
     if type(obj) is not Observation:
         raise NotAnObservation(
-            f"{where} accepts only rover_sim.mission.observation.Observation (sensor data), got "
+            f"{where} accepts only rover_sim.world.observation.Observation (sensor data), got "
             f"{type(obj).__module__}.{type(obj).__qualname__}: the onboard stack never sees ground truth"
         )
     return obj  # type: ignore[return-value]

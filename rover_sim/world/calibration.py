@@ -195,7 +195,7 @@ def build_true_lens(  # noqa: ANN201
 def render_rectified(renderer, calibration: RunCalibration, pair: str) -> tuple[np.ndarray, np.ndarray, StereoRig]:  # noqa: ANN001
     """Render ``pair`` raw (``renderer`` built with this calibration's true lens, :func:`build_true_lens`) and
     rectify it with the onboard models at the mast's current state: flight-profile pairs for benchmarks that run
-    outside a :class:`~rover_sim.mission.world.World` (e.g. ``bench stereo``). Returns (left, right, rig)."""
+    outside a :class:`~rover_sim.world.world.World` (e.g. ``bench stereo``). Returns (left, right, rig)."""
     px = renderer.config.resolution_px
     pins = [camera_model(renderer.sim.model, renderer.sim.data, f"{pair}_{s}", px, px) for s in ("left", "right")]
     calib = StereoCalibration(calibration.onboard_model(pins[0]), calibration.onboard_model(pins[1]), pins[0])
