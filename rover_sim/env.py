@@ -26,8 +26,8 @@ from rover_sim.errors import PhysicsDiverged
 
 if TYPE_CHECKING:
     from nav.rectify import Rectification
-    from rover_sim.mission.scenario import Scenario
     from rover_sim.render.renderer import StereoRenderer
+    from rover_sim.scenario.schema import Scenario
     from rover_sim.sim.physics import RoverSim
     from rover_sim.sim.sensors import SensorSuite
     from rover_sim.world.calibration import RunCalibration
@@ -56,7 +56,7 @@ class RewardConfig:
 def planned_destination(sc: Scenario) -> tuple[float, float] | None:
     """Where the scenario's commands lead on paper (no slip): the last goto/autonav target, else the end point
     of the drive/arc/turn sequence integrated from the start pose; None if the commands do not move the rover."""
-    from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, TurnCmd
+    from rover_sim.scenario.schema import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, TurnCmd
 
     x, y, yaw = sc.start.x_m, sc.start.y_m, math.radians(sc.start.yaw_deg)
     moved = False
@@ -175,8 +175,8 @@ class RoverEnv(gymnasium.Env):
         image_noise: bool | None = None,
         shadows: bool | None = None,
     ) -> None:
-        from rover_sim.mission.scenario import Scenario, load_scenario
         from rover_sim.render.cameras import STEREO_PAIRS
+        from rover_sim.scenario.schema import Scenario, load_scenario
 
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, list(overrides))
         if not cameras or any(c not in STEREO_PAIRS for c in cameras):

@@ -38,7 +38,6 @@ import numpy as np
 from nav.epipolar import EpipolarCheck
 from nav.rocks import ROCK_SHAPES
 from rover_sim.mission import acceptance
-from rover_sim.mission.scenario import load_scenario
 from rover_sim.mission.survey import (
     ExtractionEval,
     MatchEval,
@@ -53,6 +52,7 @@ from rover_sim.mission.survey import (
     evaluate_match,
     rocks_in_true_frame,
 )
+from rover_sim.scenario.schema import load_scenario
 from terrains import Terrain, rock_class
 
 SCENARIO = "rock_localization"

@@ -19,10 +19,10 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.lens import CameraModel
 from nav.rectify import StereoCalibration, rectification
-from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.render.cameras import camera_model
 from rover_sim.render.imaging import ImagingSpec
 from rover_sim.render.renderer import RenderConfig, StereoRenderer
+from rover_sim.scenario.lens_spec import LensErrorSpec
 from rover_sim.world.calibration import RunCalibration, build_true_lens
 
 FLIGHT_SEED_OFFSET = 1000  # calibration draws independent of the terrain seeds

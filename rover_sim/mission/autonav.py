@@ -36,7 +36,7 @@ SOL_DETAIL_EVERY = 4
 
 if TYPE_CHECKING:
     from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.scenario import AutonavCmd
+    from rover_sim.scenario.schema import AutonavCmd
     from rover_sim.world.observation import Observation
 
 HAZCAM = "hazcam_front"

@@ -14,7 +14,7 @@ from rover_sim.io.blueprint import RunLayout, blueprint_for
 from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission.evaluator import Metrics
 from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.scenario import AutonavCmd, Scenario
+from rover_sim.scenario.schema import AutonavCmd, Scenario
 
 
 def layout_of(sc: Scenario) -> RunLayout:
@@ -157,7 +157,7 @@ def _run(
     import time
 
     from rover_sim.io.recording import RerunRecorder
-    from rover_sim.mission.scenario import load_scenario
+    from rover_sim.scenario.schema import load_scenario
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
     if out_dir is not None:

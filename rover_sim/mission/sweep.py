@@ -160,7 +160,7 @@ def _split_top_level(text: str) -> list[str]:
 
 def parse_grid(text: str) -> GridAxis:
     """``terrain.slope.slope_deg=10,15,20`` -> a :class:`GridAxis`; values are TOML like ``--set`` values."""
-    from rover_sim.mission.scenario import parse_override
+    from rover_sim.scenario.schema import parse_override
 
     if "=" not in text:
         raise ConfigError("--grid", text, "expected dotted.key=v1,v2,... (e.g. terrain.slope.slope_deg=10,15,20)")
@@ -192,7 +192,7 @@ def plan_jobs(
     ``overrides`` (``--set`` texts) apply to every job before the grid values. Points that resolve to the same
     scenario (``10`` and ``10.0``) are one job.
     """
-    from rover_sim.mission.scenario import load_scenario
+    from rover_sim.scenario.schema import load_scenario
 
     keys = [a.key for a in axes]
     if len(set(keys)) != len(keys):
@@ -239,7 +239,7 @@ def run_job(job: Job, jobs_dir: str) -> JobResult:
     """
     job_dir = Path(jobs_dir) / job.job_id
     try:
-        from rover_sim.mission.scenario import Scenario
+        from rover_sim.scenario.schema import Scenario
 
         scenario = Scenario.model_validate(job.scenario)
         from rover_sim.mission.run import run_scenario

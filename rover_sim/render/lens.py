@@ -30,8 +30,8 @@ import numpy as np
 
 from nav.camera import PinholeCamera
 from nav.lens import CahvorCamera, CameraModel, FisheyeCamera, pixel_grid
-from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.render.cameras import STEREO_PAIRS
+from rover_sim.scenario.lens_spec import LensErrorSpec
 
 EDGE_MARGIN_PX = 2.0  # render pixels kept beyond the outermost raw ray (bilinear neighbours)
 

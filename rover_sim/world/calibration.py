@@ -11,7 +11,7 @@ One seeded draw per run (stream ``LENS_SEED_STREAM`` of the scenario seed) gives
 
 The onboard model of a camera is the true model (lens, mounting) at the **commanded** mast pointing with these
 errors applied. :class:`MastEncoders` draws, per repointing, where the mast truly stops (resolution + backlash).
-Sizes and sources: :mod:`rover_sim.mission.lens_spec`.
+Sizes and sources: :mod:`rover_sim.scenario.lens_spec`.
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from scipy.spatial.transform import Rotation
 from nav.camera import PinholeCamera, StereoRig
 from nav.lens import CahvorCamera, CameraModel, FisheyeCamera
 from nav.rectify import StereoCalibration, rectification
-from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model
 from rover_sim.render.lens import nominal_model, with_rotation
+from rover_sim.scenario.lens_spec import LensErrorSpec
 
 LENS_SEED_STREAM = 16_001  # independent of the other seeded streams of a scenario
 MAST_SEED_STREAM = 16_002

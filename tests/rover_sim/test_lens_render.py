@@ -13,10 +13,10 @@ from scipy.spatial.transform import Rotation
 from nav.camera import transform_points
 from nav.epipolar import EpipolarCheck
 from nav.rectify import StereoCalibration, epipolar_row_error_px, rectification
-from rover_sim.mission.lens_spec import FLIGHT_DEFAULTS, LensErrorSpec
-from rover_sim.mission.sensors_spec import SensorsSpec
 from rover_sim.render.cameras import camera_model
 from rover_sim.render.renderer import StereoRenderer
+from rover_sim.scenario.lens_spec import FLIGHT_DEFAULTS, LensErrorSpec
+from rover_sim.scenario.sensors_spec import SensorsSpec
 from rover_sim.world.calibration import MastEncoders, RunCalibration, build_true_lens, render_rectified
 from tests.rover_sim.test_render import bright_blob_centroid, world_T_rover
 
@@ -300,7 +300,7 @@ def test_flight_world_points_the_mast_with_encoder_error_and_keeps_the_commanded
     calibrated models) is built at the commanded angles; observations carry raw pairs that Onboard rectifies."""
     from rover_sim.mission.onboard import Onboard
     from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
-    from rover_sim.mission.scenario import scenario_from_dict
+    from rover_sim.scenario.schema import scenario_from_dict
     from rover_sim.world.calibration import cameras_at_pointing
     from rover_sim.world.world import World
 

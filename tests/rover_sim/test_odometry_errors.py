@@ -17,11 +17,11 @@ from rover_sim.mission.evaluator import (
     segment_errors_pct,
     vo_covariance_nees,
 )
-from rover_sim.mission.odometry_spec import FLIGHT_DEFAULTS, OdometryErrorSpec
 from rover_sim.mission.onboard import Onboard
 from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import scenario_from_dict
-from rover_sim.mission.sensors_spec import SensorsSpec
+from rover_sim.scenario.odometry_spec import FLIGHT_DEFAULTS, OdometryErrorSpec
+from rover_sim.scenario.schema import scenario_from_dict
+from rover_sim.scenario.sensors_spec import SensorsSpec
 from rover_sim.sim.sensors import EncoderModel, ImuModel, OdometryErrors
 from rover_sim.world.observation import Observation
 from rover_sim.world.world import with_heading_error

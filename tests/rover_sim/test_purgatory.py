@@ -14,7 +14,7 @@ from rover_sim.errors import ConfigError
 from rover_sim.mission.acceptance import judge
 from rover_sim.mission.evaluator import Metrics, final_slip, wheel_sinkage_m
 from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import PassSpec, load_scenario
+from rover_sim.scenario.schema import PassSpec, load_scenario
 from rover_sim.sim.drive import Straight, execute
 from rover_sim.sim.physics import WHEEL_RADIUS_M, WHEEL_WIDTH_M, RoverSim
 from rover_sim.sim.terramechanics_wr import DRIFT, SAND

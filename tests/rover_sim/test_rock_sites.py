@@ -10,7 +10,6 @@ import pytest
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.rocks import ExtractedRock, LocalPlane, PanoramaStereoParams, Pose4, RockModel, RockPeak, SiteMatch
 from nav.trajectory import Pose
-from rover_sim.mission.scenario import GotoCmd, load_scenario, scenario_from_dict
 from rover_sim.mission.survey import (
     VO_SYSTEMATIC_SIGMA_FRAC,
     RockSiteSurvey,
@@ -19,6 +18,7 @@ from rover_sim.mission.survey import (
     evaluate_extraction,
     evaluate_match,
 )
+from rover_sim.scenario.schema import GotoCmd, load_scenario, scenario_from_dict
 from terrains import ExplicitRockSpec, RockSpec, TerrainRecipe, synthesize
 
 

@@ -90,8 +90,8 @@ class MissionSpy(TileSpy):
 def _mission_tiles(deformable: bool) -> MissionSpy:
     """purgatory_ripple's first 0.6 m (its pass bounds dropped: they need deformation)."""
     from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.scenario import scenario_from_dict
     from rover_sim.resources import scenarios_dir
+    from rover_sim.scenario.schema import scenario_from_dict
 
     data = tomllib.loads((scenarios_dir() / "purgatory_ripple.toml").read_text())
     data["physics"]["deformable"] = deformable

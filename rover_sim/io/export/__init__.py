@@ -38,8 +38,8 @@ from rover_sim.io.export.base import DatasetWriter, ExportMeta, Frame, Stream
 
 if TYPE_CHECKING:
     from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.scenario import Scenario
     from rover_sim.render.renderer import StereoFrame, StereoRenderer
+    from rover_sim.scenario.schema import Scenario
     from rover_sim.world.observation import Observation
 
 __all__ = ["CAMERAS", "FORMATS", "DatasetSink", "DatasetWriter", "ExportOptionError", "ExportSummary", "Frame",
@@ -224,7 +224,7 @@ def export_scenario(
     the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``."""
     from rover_sim.mission.pipeline import Mission
     from rover_sim.mission.run import write_outputs
-    from rover_sim.mission.scenario import Scenario, load_scenario
+    from rover_sim.scenario.schema import Scenario, load_scenario
 
     for fmt in formats:
         check_options(fmt, camera, rate_hz)

@@ -19,8 +19,8 @@ from nav.gestalt import GestaltParams
 from nav.stereo import StereoParams
 from nav.vo import SanityConstraints, VoParams
 from rover_sim.errors import ConfigError
-from rover_sim.mission.sensors_spec import SensorsSpec
 from rover_sim.resources import scenarios_dir
+from rover_sim.scenario.sensors_spec import SensorsSpec
 from rover_sim.sim.ephemeris import sun_azimuth_elevation_deg
 from terrains import TerrainRecipe
 
