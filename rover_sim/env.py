@@ -5,7 +5,7 @@ Registered as ``rover_sim/MER-v0`` (goal = the scenario's destination, not obser
 ``rover_sim`` imports gymnasium but not mujoco; the world is built on ``reset``.
 
 Built on the world layer (terrains, RoverSim, SensorSuite, StereoRenderer, drive primitives), the way
-``rover_sim.mission.pipeline.Mission`` builds a world, and on the mission's camera chain for the sensor profile
+``rover_sim.runtime.runner.Mission`` builds a world, and on the mission's camera chain for the sensor profile
 (``[sensors] profile``, see :class:`RoverEnv`). The honesty rule holds: observations carry only what the
 rover senses (images, IMU, encoders, commanded mast pointing, an operator-given goal); ground truth goes to
 ``info``. GL: each world owns one EGL context; vector environments must use ``context="spawn"``.
@@ -107,7 +107,7 @@ class RoverEnv(gymnasium.Env):
     (:mod:`rover_sim.render.imaging`, always noisy: ``image_noise`` does not apply), the mast stopping within its
     encoder error, then rectified through the *calibrated* models at the commanded pointing
     (:func:`~rover_sim.world.calibration.onboard_stereo_models`, :func:`nav.rectify.rectification`, as
-    :meth:`rover_sim.mission.onboard.Onboard.rectified` does), so calibration errors reach a policy as they reached
+    :meth:`rover_sim.runtime.onboard.Onboard.rectified` does), so calibration errors reach a policy as they reached
     MER's stereo and VO (the shapes are the same in both profiles). ``render()`` (``rgb_array``) is a colour pinhole
     view for people, not a sensor: it is the same in both profiles.
 

@@ -16,8 +16,8 @@ import numpy as np
 
 from rover_sim import interrupts
 from rover_sim.bench import write_json
-from rover_sim.mission import acceptance
-from rover_sim.mission.run import run_scenario
+from rover_sim.runtime import acceptance
+from rover_sim.runtime.run import run_scenario
 from rover_sim.scenario.schema import scenario_from_dict
 
 GOAL_DISTANCE_M = 20.0

@@ -25,10 +25,10 @@ import numpy as np
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from nav.dimes import DimesParams, DimesResult, estimate_velocity
 from rover_sim.bench import write_json
-from rover_sim.mission import acceptance
 from rover_sim.mission.descent import FEATURELESS_TERRAIN, DescentConditions, DescentRun, DescentWorld
+from rover_sim.runtime import acceptance
 
-ACCEPT_1SIGMA_MPS = acceptance.DIMES.max_velocity_error_1sigma_m_s  # bars: rover_sim.mission.acceptance
+ACCEPT_1SIGMA_MPS = acceptance.DIMES.max_velocity_error_1sigma_m_s  # bars: rover_sim.runtime.acceptance
 MAX_WIND_MPS = 20.0
 WIND_BINS_MPS = (0.0, 5.0, 10.0, 15.0, 20.0)
 FEATURELESS_SEED_OFFSET = 10_000  # conditions seeds of the featureless descents

@@ -37,7 +37,6 @@ import numpy as np
 
 from nav.epipolar import EpipolarCheck
 from nav.rocks import ROCK_SHAPES
-from rover_sim.mission import acceptance
 from rover_sim.mission.survey import (
     ExtractionEval,
     MatchEval,
@@ -52,12 +51,13 @@ from rover_sim.mission.survey import (
     evaluate_match,
     rocks_in_true_frame,
 )
+from rover_sim.runtime import acceptance
 from rover_sim.scenario.schema import load_scenario
 from terrains import Terrain, rock_class
 
 SCENARIO = "rock_localization"
 MAX_MATCH_SEPARATION_M = 26.0
-ACCEPT = dataclasses.asdict(acceptance.ROCKS)  # the bars live in rover_sim.mission.acceptance
+ACCEPT = dataclasses.asdict(acceptance.ROCKS)  # the bars live in rover_sim.runtime.acceptance
 NAVCAM_BASELINE_M = 0.2  # for reporting the fitted bias as a toe-in angle
 
 

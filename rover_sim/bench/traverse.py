@@ -52,8 +52,8 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
     import numpy as np
 
     from rover_sim.io.recording import RerunRecorder
-    from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.run import sol_recording, write_outputs
+    from rover_sim.runtime.run import sol_recording, write_outputs
+    from rover_sim.runtime.runner import Mission
     from rover_sim.scenario.schema import load_scenario
 
     sc = load_scenario(CASES[name], list(overrides))

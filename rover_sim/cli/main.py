@@ -379,7 +379,7 @@ def run_cmd(
     if out is None:
         out, overwrite = Path("runs/latest"), True
     with guarded():
-        from rover_sim.mission.run import run_scenario
+        from rover_sim.runtime.run import run_scenario
         from rover_sim.scenario.schema import load_scenario, plugin_overrides
 
         overrides = plugin_overrides(vo, stereo, planner) + list(set_ or [])

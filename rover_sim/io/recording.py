@@ -7,7 +7,7 @@ The entity tree mirrors the frame tree (rerun ``nuscenes`` example style)::
     world/terrain/rocks                     Mesh3D of every rock, static
     world/terrain/tiles/t<x>_<y>[/rocks]    a streamed site: each tile once, coarse, when it first appears
     world/terrain/ground/t<i>_<j>           a deformable site (no world/terrain mesh): ground tiles on the timeline,
-                                            re-logged at full resolution when ruts change them (mission/rut_log.py)
+                                            re-logged at full resolution when ruts change them (io/rut_log.py)
     world/rover                             Transform3D (world <- rover) every tick
     world/rover/visual                      Boxes3D + Cylinders3D (body, deck, mast, 6 wheels), static
     world/rover/<camera>/{left,right}       Transform3D (rover <- camera, from T_rover_cam; re-logged only when it

@@ -19,7 +19,7 @@ import numpy as np
 
 from nav.gestalt import Arc as GestaltArc
 from nav.gestalt import arc_pose
-from rover_sim.mission.onboard import (  # noqa: F401 (re-exported for callers of the old module)
+from rover_sim.runtime.onboard import (  # noqa: F401 (re-exported for callers of the old module)
     MAX_RANGE_M,
     SELF_MASK_HALF_LENGTH_M,
     SELF_MASK_HALF_WIDTH_M,
@@ -35,7 +35,7 @@ from rover_sim.world.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
 SOL_DETAIL_EVERY = 4
 
 if TYPE_CHECKING:
-    from rover_sim.mission.pipeline import Mission
+    from rover_sim.runtime.runner import Mission
     from rover_sim.scenario.schema import AutonavCmd
     from rover_sim.world.observation import Observation
 

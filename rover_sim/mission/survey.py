@@ -34,7 +34,7 @@ Sensor profile: with ``[sensors.lens]`` on (flight) the panorama pairs are raw i
 (:mod:`rover_sim.render.lens`) and the CCD image formation (:mod:`rover_sim.render.imaging`), rectified on board
 with the run's *calibrated* models at the *commanded* mast pointing (the mast stops within its encoder errors):
 :func:`rover_sim.world.calibration.onboard_stereo_models` and
-:meth:`rover_sim.mission.onboard.Onboard.rectified`, the calls the mission's own pairs go through, with the same
+:meth:`rover_sim.runtime.onboard.Onboard.rectified`, the calls the mission's own pairs go through, with the same
 seeded calibration draw. The ``ideal`` profile renders the exact pinhole pairs, as before. At 2048 px a
 rendered pixel is a quarter of a 1024^2 CCD photosite; the image formation then gives each pixel a photosite's
 noise (it never splits a photosite), a little noisier than an upsampled 1024^2 image.
@@ -71,8 +71,8 @@ from nav.rocks import (
     voxel_downsample,
 )
 from nav.rocks.range_bias import RangeBiasFit, correct_rocks, corrected_points, estimate_inverse_range_bias
-from rover_sim.mission.onboard import VoStep
-from rover_sim.mission.pipeline import Mission
+from rover_sim.runtime.onboard import VoStep
+from rover_sim.runtime.runner import Mission
 from rover_sim.scenario.schema import GotoCmd, Scenario
 from rover_sim.sim.drive import TICK_S
 from rover_sim.world.calibration import build_true_lens, onboard_stereo_models

@@ -242,7 +242,7 @@ def run_job(job: Job, jobs_dir: str) -> JobResult:
         from rover_sim.scenario.schema import Scenario
 
         scenario = Scenario.model_validate(job.scenario)
-        from rover_sim.mission.run import run_scenario
+        from rover_sim.runtime.run import run_scenario
 
         metrics = run_scenario(scenario, job_dir, record=False)
         return JobResult(job.job_id, "ok", metrics=metrics.deterministic_dict())  # = its metrics.json

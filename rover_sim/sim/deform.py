@@ -117,7 +117,7 @@ class DeformableTerrain:
 
     def pop_dirty_cells_for_log(self) -> tuple[int, int, int, int] | None:
         """As :meth:`pop_dirty_cells`, for a second consumer with its own box (the recording's ground tiles,
-        ``rover_sim.mission.rut_log``)."""
+        ``rover_sim.io.rut_log``)."""
         return self._pop(_LOG)
 
     def _pop(self, row: int) -> tuple[int, int, int, int] | None:

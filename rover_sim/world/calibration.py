@@ -163,7 +163,7 @@ def onboard_stereo_models(
 ) -> tuple[StereoRig, StereoCalibration | None]:
     """What flight software holds for ``camera``'s pair at ``px`` and the *commanded* mast pointing: without lens
     errors (``calibration`` None) the exact pinhole rig there (only the mast encoders err); with them the calibrated
-    raw models and the rectified rig they define (what :meth:`~rover_sim.mission.onboard.Onboard.rectified` uses)."""
+    raw models and the rectified rig they define (what :meth:`~rover_sim.runtime.onboard.Onboard.rectified` uses)."""
     names = [f"{camera}_left", f"{camera}_right"]
     pins = cameras_at_pointing(model, data, names, px, pan_deg, elevation_deg)
     if calibration is None:

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from nav.trajectory import Pose
-from rover_sim.mission.onboard import Onboard
-from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
+from rover_sim.runtime.onboard import Onboard
+from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
 from rover_sim.scenario.schema import NavSpec
 from rover_sim.world.observation import NotAnObservation, Observation
 
@@ -144,7 +144,7 @@ def test_nav_needs_only_numpy_scipy_opencv():
 
 def test_onboard_imports_no_simulator_or_truth():
     allowed_rover_sim = {"rover_sim.world.observation"}
-    for mod in ("rover_sim.mission.onboard", "rover_sim.world.observation"):
+    for mod in ("rover_sim.runtime.onboard", "rover_sim.world.observation"):
         ours = {m for m in _imports(MODULES[mod], mod) if m.startswith("rover_sim")}
         assert ours <= allowed_rover_sim, f"{mod} imports {ours - allowed_rover_sim}"
 

@@ -22,7 +22,7 @@ from rover_sim.cli.outdir import OutDirRefused, prepare_out_dir
 from rover_sim.cli.status import ExitStatus, of_reason, worst
 from rover_sim.errors import ConfigError
 from rover_sim.io.junit import Case, write_junit
-from rover_sim.mission.run import run_scenario
+from rover_sim.runtime.run import run_scenario
 from rover_sim.scenario.schema import scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -269,7 +269,7 @@ def test_junit_writer(tmp_path):
 
 def test_user_baseline_relative_tolerance(tmp_path):
     from rover_sim.bench.missions import load_baseline, relative_regressions
-    from rover_sim.mission.evaluator import Metrics
+    from rover_sim.runtime.evaluator import Metrics
 
     def metrics(vo: float, conv: float) -> Metrics:
         return Metrics("s", 0, 10.0, 3.0, vo, conv, 5.0, 4.0, True, "all criteria met", 1.0)

@@ -176,7 +176,7 @@ def test_flight_images_are_the_missions_rectified_pairs():
     rectification through the calibrated models: World + Onboard.rectified) for the same world and noise seed."""
     from types import SimpleNamespace
 
-    from rover_sim.mission.onboard import Onboard
+    from rover_sim.runtime.onboard import Onboard
     from rover_sim.world.world import World
 
     # classic regolith: the env paints the world's soil as before (the texture is not the sensor chain)

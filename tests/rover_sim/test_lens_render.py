@@ -298,8 +298,8 @@ FIELD = {
 def test_flight_world_points_the_mast_with_encoder_error_and_keeps_the_commanded_rig() -> None:
     """The true mast stops off the command by the drawn encoder error; the onboard rig (rectified, from the
     calibrated models) is built at the commanded angles; observations carry raw pairs that Onboard rectifies."""
-    from rover_sim.mission.onboard import Onboard
-    from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
+    from rover_sim.runtime.onboard import Onboard
+    from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
     from rover_sim.scenario.schema import scenario_from_dict
     from rover_sim.world.calibration import cameras_at_pointing
     from rover_sim.world.world import World

@@ -10,15 +10,15 @@ import pytest
 
 from nav.trajectory import Pose, Trajectory
 from nav.types import EncoderSample, ImuSample
-from rover_sim.mission.evaluator import (
+from rover_sim.runtime.evaluator import (
     CHI2_3DOF_MEDIAN,
     VoStepError,
     rms_position_error_m,
     segment_errors_pct,
     vo_covariance_nees,
 )
-from rover_sim.mission.onboard import Onboard
-from rover_sim.mission.run import run_scenario
+from rover_sim.runtime.onboard import Onboard
+from rover_sim.runtime.run import run_scenario
 from rover_sim.scenario.odometry_spec import FLIGHT_DEFAULTS, OdometryErrorSpec
 from rover_sim.scenario.schema import scenario_from_dict
 from rover_sim.scenario.sensors_spec import SensorsSpec
@@ -188,7 +188,7 @@ def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_
     import json
 
     from rover_sim.bench import missions
-    from rover_sim.mission.evaluator import Metrics
+    from rover_sim.runtime.evaluator import Metrics
 
     seen = []
     gated = missions.BASELINE_PROFILE

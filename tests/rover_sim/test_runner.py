@@ -9,8 +9,8 @@ import pytest
 
 from nav.trajectory import read_tum
 from rover_sim.io.recording import entity_row_counts
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.run import run_scenario
+from rover_sim.runtime.run import run_scenario
+from rover_sim.runtime.runner import Mission
 from rover_sim.scenario.schema import scenario_from_dict
 
 TINY = {

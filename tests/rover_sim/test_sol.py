@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from rover_sim.errors import ConfigError
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.sol import BudgetSpent, SolBudget
+from rover_sim.runtime.runner import Mission
+from rover_sim.runtime.sol import BudgetSpent, SolBudget
 from rover_sim.scenario.schema import SolSpec, load_scenario, scenario_from_dict
 from rover_sim.sim.assembly import Sun
 from rover_sim.world.clock import (

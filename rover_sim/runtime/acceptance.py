@@ -10,9 +10,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rover_sim.mission.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_POSITIVE_FRACTION
-from rover_sim.mission.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
-from rover_sim.mission.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
+from rover_sim.runtime.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_POSITIVE_FRACTION
+from rover_sim.runtime.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
+from rover_sim.runtime.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
 from rover_sim.scenario.schema import KeepOut, PassSpec
 
 TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)

@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 from nav.vo.texture import MIN_OVERLAP
 
 if TYPE_CHECKING:
-    from rover_sim.mission.pipeline import Mission
+    from rover_sim.runtime.runner import Mission
 
 POOR_VIEW_FEATURES = 60  # the planned view is poor below this many trackable features (3x VO's min_features)
 CANDIDATES_DEG = ((0.0, 0.0), (12.0, 0.0), (-12.0, 0.0), (0.0, 8.0), (0.0, -8.0))  # (pan, elevation) offsets

@@ -27,14 +27,14 @@ from nav.trajectory import Pose, Trajectory
 from rover_sim import interrupts
 from rover_sim.errors import PhysicsDiverged, PluginError
 from rover_sim.io.recording import NullRecorder, Recorder
-from rover_sim.mission import acceptance
-from rover_sim.mission.acceptance import TALL_ROCK_M
-from rover_sim.mission.evaluator import Evaluator, Metrics, VoStepRecord
-from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
-from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
-from rover_sim.mission.pointing import seek_texture
-from rover_sim.mission.rut_log import RutLog
-from rover_sim.mission.sol import BudgetSpent, SolBudget
+from rover_sim.io.rut_log import RutLog
+from rover_sim.runtime import acceptance
+from rover_sim.runtime.acceptance import TALL_ROCK_M
+from rover_sim.runtime.evaluator import Evaluator, Metrics, VoStepRecord
+from rover_sim.runtime.onboard import Onboard, VoStep, heading_rad
+from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
+from rover_sim.runtime.pointing import seek_texture
+from rover_sim.runtime.sol import BudgetSpent, SolBudget
 from rover_sim.scenario.schema import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, SleepCmd, TurnCmd
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
 from rover_sim.sim.physics import WHEEL_RADIUS_M, RoverSim
@@ -421,7 +421,7 @@ class Mission:
     def log_static(self) -> None:
         if self.sim.streamer is not None:
             self.log_terrain_tiles()
-        elif self.sim.deform is not None:  # the ground as tiles re-logged where ruts change them (mission/rut_log.py)
+        elif self.sim.deform is not None:  # the ground as tiles re-logged where ruts change them (io/rut_log.py)
             self.rec.log_terrain(self.terrain, ground=False)
             self.rut_log = RutLog(self.sim, self.rec)
             self.rut_log.log_all(self.sim.time_s, self.step)
