@@ -93,7 +93,7 @@ def _rows(seeds: list[int], workers: int, overrides: tuple[str, ...] = ()):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from rover_sim.mission.sweep import init_worker
+    from rover_sim.apps.sweep import init_worker
 
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=min(workers, len(seeds)), mp_context=ctx, initializer=init_worker) as pool:

@@ -3,7 +3,7 @@
 The rover starts at the first site and drives to the others with the runner's VO-corrected goto (dead reckoning and
 VO are both measured on this drive: the runner keeps a wheel/IMU dead reckoner beside the VO-corrected one). At
 every site it takes a navcam stereo panorama; rocks are extracted and modelled, matched between every two sites up to
-26 m apart, and the chain of sites is adjusted (:mod:`rover_sim.mission.survey`, :mod:`nav.rocks`). Figures against the
+26 m apart, and the chain of sites is adjusted (:mod:`rover_sim.apps.survey`, :mod:`nav.rocks`). Figures against the
 terrain's rock list and the simulator's true poses:
 
 * extraction: recall of generated rocks taller than 20 cm within 30 m of each site, precision of the extracted
@@ -37,7 +37,7 @@ import numpy as np
 
 from nav.epipolar import EpipolarCheck
 from nav.rocks import ROCK_SHAPES
-from rover_sim.mission.survey import (
+from rover_sim.apps.survey import (
     ExtractionEval,
     MatchEval,
     RangeCalibration,
@@ -231,7 +231,7 @@ def _range_bias(cal: RangeCalibration, raw_total: ExtractionEval, raw_sites: lis
 
 def _by_class(sites: list, terrain: Terrain, max_range_m: float = 30.0, min_height_m: float = 0.2) -> dict:
     """Recall, precision and median model RMS per rock class ("analytic", "irregular"), summed over the sites (the
-    same targets and association as :func:`rover_sim.mission.survey.evaluate_extraction`)."""
+    same targets and association as :func:`rover_sim.apps.survey.evaluate_extraction`)."""
     truth = terrain.rocks
     classes = np.array([rock_class(r) for r in truth])
     txy = np.array([[r.x_m, r.y_m] for r in truth]).reshape(-1, 2)

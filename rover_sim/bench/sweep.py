@@ -17,8 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from rover_sim.apps.sweep import SweepResult, default_workers, run_sweep
 from rover_sim.bench import write_json
-from rover_sim.mission.sweep import SweepResult, default_workers, run_sweep
 from rover_sim.runtime import acceptance
 
 GRID = ("terrain.slope.slope_deg=0,5,10,15", "terrain.material.kind=sand,bedrock")

@@ -148,7 +148,7 @@ def _run_isolated(name: str, out_dir: str, overrides: tuple[str, ...]) -> dict:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from rover_sim.mission.sweep import init_worker
+    from rover_sim.apps.sweep import init_worker
 
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=init_worker) as pool:

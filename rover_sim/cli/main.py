@@ -453,7 +453,7 @@ def sweep_cmd(
     set_: SetOpt = None,
 ) -> None:
     """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
-    from rover_sim.mission.sweep import run_sweep
+    from rover_sim.apps.sweep import run_sweep
 
     def report(done: int, total: int, job, result) -> None:
         if not result.ok:

@@ -3,7 +3,7 @@
 It owns nothing the algorithms need to know about (kiss-icp ``pipeline.py`` style): the :class:`World` (physics,
 soil, sensors, rendering), the :class:`Onboard` stack (dead reckoning, VO, stereo, GESTALT; fed only
 :class:`Observation` objects), the :class:`Evaluator` (the only place truth meets the estimates) and the recorder
-(a sink). Autonav (:mod:`rover_sim.mission.autonav`) and rock surveys (:mod:`rover_sim.mission.survey`) drive a
+(a sink). Autonav (:mod:`rover_sim.apps.autonav`) and rock surveys (:mod:`rover_sim.apps.survey`) drive a
 :class:`Mission` through its public methods only.
 
 Per 8 Hz tick (:meth:`Mission.tick`): sensors -> Observation -> onboard dead reckoning -> evaluator (truth beside
@@ -102,7 +102,7 @@ class Mission:
         self.error: str | None = None
         self.interrupted: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM (errors.Terminated) stopped the run
         self.step = 0
-        self.autonav_stats = None  # set by rover_sim.mission.autonav when the scenario uses autonav
+        self.autonav_stats = None  # set by rover_sim.apps.autonav when the scenario uses autonav
         self._autonav_runs: list = []  # the stats of each autonav command run (several in a drive of several sols)
         # public hooks (sinks): exporters, surveys and user code subscribe; none may change the run
         self.vo_listeners: list[Callable[[VoStep, np.ndarray], None]] = []  # (step, T_rover_cam of the pair)
@@ -198,7 +198,7 @@ class Mission:
         elif isinstance(cmd, GotoCmd):
             self.goto(cmd)
         elif isinstance(cmd, AutonavCmd):
-            from rover_sim.mission.autonav import run_autonav  # autonav drives this class: imported at use
+            from rover_sim.apps.autonav import run_autonav  # autonav drives this class: imported at use
 
             try:
                 run_autonav(self, cmd)

@@ -7,8 +7,8 @@ import copy
 
 import pytest
 
+from rover_sim.apps.autonav import SOL_DETAIL_EVERY
 from rover_sim.io.recorder_protocol import NullRecorder
-from rover_sim.mission.autonav import SOL_DETAIL_EVERY
 from rover_sim.runtime.runner import Mission
 from rover_sim.scenario.schema import scenario_from_dict
 

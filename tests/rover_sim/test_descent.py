@@ -14,7 +14,7 @@ import pytest
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.dimes import estimate_velocity
 from nav.geometry import so3_log
-from rover_sim.mission.descent import (
+from rover_sim.apps.descent import (
     FEATURELESS_TERRAIN,
     IMAGE_ALTITUDES_M,
     DescentCameraConfig,

@@ -1,4 +1,4 @@
-"""Rock sites in the simulator (rover_sim.mission.survey): the scenario, the evaluation, a one-site panorama."""
+"""Rock sites in the simulator (rover_sim.apps.survey): the scenario, the evaluation, a one-site panorama."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.rocks import ExtractedRock, LocalPlane, PanoramaStereoParams, Pose4, RockModel, RockPeak, SiteMatch
 from nav.trajectory import Pose
-from rover_sim.mission.survey import (
+from rover_sim.apps.survey import (
     VO_SYSTEMATIC_SIGMA_FRAC,
     RockSiteSurvey,
     SiteSurvey,

@@ -16,9 +16,8 @@ from pathlib import Path
 import pytest
 
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
-from rover_sim.errors import ConfigError
-from rover_sim.mission import sweep
-from rover_sim.mission.sweep import (
+from rover_sim.apps import sweep
+from rover_sim.apps.sweep import (
     METRIC_COLUMNS,
     DaskUnavailable,
     Job,
@@ -30,6 +29,7 @@ from rover_sim.mission.sweep import (
     result_columns,
     run_sweep,
 )
+from rover_sim.errors import ConfigError
 
 TINY_TOML = """
 name = "tiny_sweep"
@@ -81,7 +81,7 @@ def fake_job(job: Job, jobs_dir: str) -> JobResult:
 
 def fail_on_seed_1(job: Job, jobs_dir: str) -> JobResult:
     if job.seed == 1:
-        from rover_sim.mission.sweep import run_job
+        from rover_sim.apps.sweep import run_job
 
         bad = Job(job.job_id, job.params, job.seed, job.scenario | {"commands": []})  # fails validation in the worker
         return run_job(bad, jobs_dir)

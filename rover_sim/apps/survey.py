@@ -1,7 +1,8 @@
 """Rock-based cross-site localisation in the simulator: drive to sites, navcam stereo panoramas, evaluation.
 
-The pipeline object (:class:`RockSiteSurvey`) owns a :class:`~mission.pipeline.Mission` (terrain, physics, sensors,
-dead reckoning, VO) and a high-resolution navcam renderer; the algorithms in :mod:`nav.rocks` know none of them.
+The pipeline object (:class:`RockSiteSurvey`) owns a :class:`~rover_sim.runtime.runner.Mission` (terrain, physics,
+sensors, dead reckoning, VO) and a high-resolution navcam renderer; the algorithms in :mod:`nav.rocks` know none of
+them.
 A scenario's sites are its start pose plus the end of every ``goto`` command (``scenarios/rock_localization.toml``):
 the rover drives to each with the runner's VO-corrected goto, stops, stands for ``REST_BEFORE_PANORAMA_S`` (the dead
 reckoner re-levels roll and pitch from the accelerometers at rest, so the site frame is level: the paper's site frames

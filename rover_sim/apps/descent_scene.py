@@ -1,6 +1,6 @@
 """The DIMES descent scene: the MuJoCo model (terrain heightfield, texture, sun, descent camera) and its renderer.
 
-:class:`DescentCameraConfig` is the MER descent imager (see :mod:`rover_sim.mission.descent` for the scenario).
+:class:`DescentCameraConfig` is the MER descent imager (see :mod:`rover_sim.apps.descent` for the scenario).
 MuJoCo scales the clip planes by ``statistic/extent``: extent 1000 m with ``znear=0.01``, ``zfar=10`` gives 10 m
 to 10 km.
 
@@ -34,7 +34,7 @@ SKY_AMBIENT = 0.45  # uniform ambient light standing in for the dusty sky
 class DescentCameraConfig:
     """MER descent imager: 45 deg field of view, 1024x1024 12-bit; DIMES used 256x256.
 
-    See :mod:`rover_sim.mission.descent` (module docstring).
+    See :mod:`rover_sim.apps.descent` (module docstring).
     """
 
     resolution_px: int = 256
