@@ -19,12 +19,8 @@ import numpy as np
 
 from nav.gestalt import Arc as GestaltArc
 from nav.gestalt import arc_pose
-from rover_sim.runtime.onboard import (  # noqa: F401 (re-exported for callers of the old module)
-    MAX_RANGE_M,
-    SELF_MASK_HALF_LENGTH_M,
-    SELF_MASK_HALF_WIDTH_M,
+from rover_sim.runtime.onboard import (
     PlanCycle,
-    terrain_points,
 )
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
 from rover_sim.world.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S

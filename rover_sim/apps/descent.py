@@ -51,15 +51,9 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.dimes import DescentImage
 from nav.geometry import so3_exp
-from rover_sim.apps.descent_scene import (  # noqa: F401 - the scene's names re-exported from here
-    CLIP_EXTENT_M,
-    SKY_AMBIENT,
-    SUN_DIFFUSE,
-    ZFAR,
-    ZNEAR,
+from rover_sim.apps.descent_scene import (
     DescentCameraConfig,
     DescentRenderer,
-    descent_model,
 )
 from rover_sim.render.renderer import ImageNoise
 from rover_sim.sim.assembly import Sun

@@ -35,10 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rover_sim.apps.sweep_plots import (  # noqa: F401 - the single plots re-exported from here
-    plot_error_vs_slope,
-    plot_slip_map,
-    plot_slip_vs_slope,
+from rover_sim.apps.sweep_plots import (
     plot_sweep,
 )
 from rover_sim.errors import ConfigError, DaskUnavailable, SchedulerUnreachable

@@ -41,7 +41,7 @@ def _fail(err: Exception) -> None:
 @app.command("check-gl")
 def check_gl_cmd() -> None:
     """Check that offscreen rendering (EGL) works; prints the install hint if it does not."""
-    from rover_sim.render.renderer import check_gl
+    from rover_sim.render.gl import check_gl
 
     try:
         check_gl()

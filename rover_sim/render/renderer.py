@@ -48,16 +48,14 @@ import numpy as np
 
 from nav.camera import PinholeCamera, StereoRig
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model, camera_world_pose, stereo_rig
-from rover_sim.render.gl import check_gl, set_viewport  # noqa: F401 - check_gl: re-exported
+from rover_sim.render.gl import check_gl, set_viewport
 from rover_sim.render.imaging import ImageFormation, ImagingSpec
 from rover_sim.render.lens import IdentityLens, TrueLens, pair_of
 from rover_sim.render.ruts import TileRuts
-from rover_sim.render.tiles import (  # noqa: F401 - TILE_MATERIAL, TerrainTiles: re-exported from here
+from rover_sim.render.tiles import (
     GROUP_HIDDEN,
     GROUP_SHOWN,
-    TILE_MATERIAL,
     TILE_PREFIX,
-    TerrainTiles,
     add_terrain_tiles,
 )
 from rover_sim.render.window import ROCK_MATERIAL, follow_window, rock_rgba, slot_box

@@ -11,7 +11,7 @@ import numpy as np
 from nav.trajectory import write_tum
 from rover_sim import interrupts
 from rover_sim.io.blueprint import RunLayout, blueprint_for
-from rover_sim.io.recording import NullRecorder, Recorder
+from rover_sim.io.recorder_protocol import NullRecorder, Recorder
 from rover_sim.runtime.evaluator import Metrics
 from rover_sim.runtime.runner import Mission
 from rover_sim.scenario.schema import AutonavCmd, Scenario

@@ -26,7 +26,7 @@ from nav.geometry import R_to_rpy
 from nav.trajectory import Pose, Trajectory
 from rover_sim import interrupts
 from rover_sim.errors import PhysicsDiverged, PluginError
-from rover_sim.io.recording import NullRecorder, Recorder
+from rover_sim.io.recorder_protocol import NullRecorder, Recorder
 from rover_sim.io.rut_log import RutLog
 from rover_sim.runtime import acceptance
 from rover_sim.runtime.acceptance import TALL_ROCK_M

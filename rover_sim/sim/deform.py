@@ -12,9 +12,10 @@ that sinkage becomes geometry, as in Chrono's SCM but on MuJoCo's heightfield gr
   soil's angle of repose (``REPOSE_DEG``, loose sand 30-35 deg) to the undisturbed surface, as loose soil
   slumps into a rut's sides;
 * **berms**: the soil a wheel pushes down is put back beside the rut (the cells from the walls' top out to
-  ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally; wider beside a deeper rut, so a wheel digging in
-  spreads the soil outward: its crest stays about as low as the rut is deep, up to 1.24x where wheels dig in
-  as they start, tests/rover_sim/test_purgatory.py): volume is conserved to the grid's resolution;
+  ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally, constants of :mod:`rover_sim.sim.wr_kernel`; wider
+  beside a deeper rut, so a wheel digging in spreads the soil outward: its crest stays about as low as the rut is
+  deep, up to 1.24x where wheels dig in as they start, tests/rover_sim/test_purgatory.py): volume is conserved to
+  the grid's resolution;
 * **multipass / compaction**: a rut is plastic: a later wheel deepens it only where its own sinkage is larger
   (SCM's loading-only-beyond-the-previous-maximum); the law is told the rut depth ahead of each wheel
   (``law.presink_m``), so only the new compaction resists (a second pass sinks less and rolls easier);
@@ -39,9 +40,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from nav.types import WHEELS
-from rover_sim.sim.wr_kernel import (  # noqa: F401 - the rut's shape constants, documented above
-    BERM_CELLS,
-    BERM_SPREAD,
+from rover_sim.sim.wr_kernel import (
     P_ALPHA,
     P_BASE,
     P_CELL,
@@ -50,7 +49,6 @@ from rover_sim.sim.wr_kernel import (  # noqa: F401 - the rut's shape constants,
     P_WIDTH,
     P_X0,
     P_Y0,
-    UPDATE_M,
     deform_after_law,
 )
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rover_sim.apps.autonav import SELF_MASK_HALF_LENGTH_M, SELF_MASK_HALF_WIDTH_M, terrain_points
+from rover_sim.runtime.onboard import SELF_MASK_HALF_LENGTH_M, SELF_MASK_HALF_WIDTH_M, terrain_points
 from rover_sim.runtime.runner import TALL_ROCK_M, Mission
 from rover_sim.scenario.schema import scenario_from_dict
 

@@ -37,7 +37,7 @@ def test_web_url_points_the_viewer_at_the_local_proxy():
 def test_a_run_without_vo_records_no_vo_series(tmp_path):
     from test_runner import TINY  # pytest puts this folder on sys.path
 
-    from rover_sim.io.recording import entity_row_counts
+    from rover_sim.io.rrd import entity_row_counts
     from rover_sim.runtime.run import run_scenario
     from rover_sim.scenario.schema import scenario_from_dict
 

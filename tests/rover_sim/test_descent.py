@@ -17,9 +17,7 @@ from nav.geometry import so3_log
 from rover_sim.apps.descent import (
     FEATURELESS_TERRAIN,
     IMAGE_ALTITUDES_M,
-    DescentCameraConfig,
     DescentConditions,
-    DescentRenderer,
     DescentTerrainSpec,
     DescentTrajectory,
     DescentWorld,
@@ -31,6 +29,7 @@ from rover_sim.apps.descent import (
     simulate_descent,
     with_wind,
 )
+from rover_sim.apps.descent_scene import DescentCameraConfig, DescentRenderer
 from rover_sim.sim.assembly import Sun
 from terrains import Terrain
 

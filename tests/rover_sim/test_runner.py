@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from nav.trajectory import read_tum
-from rover_sim.io.recording import entity_row_counts
+from rover_sim.io.rrd import entity_row_counts
 from rover_sim.runtime.run import run_scenario
 from rover_sim.runtime.runner import Mission
 from rover_sim.scenario.schema import scenario_from_dict

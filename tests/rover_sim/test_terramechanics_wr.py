@@ -16,7 +16,8 @@ from rover_sim.scenario.schema import load_scenario
 from rover_sim.sim import terramechanics, terramechanics_wr
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.soil_tables import mobilisation
-from rover_sim.sim.terramechanics_wr import BEDROCK, DRIFT, MIXED, SAND, WheelSoilLaw, pack_inputs
+from rover_sim.sim.terramechanics import pack_inputs
+from rover_sim.sim.terramechanics_wr import BEDROCK, DRIFT, MIXED, SAND, WheelSoilLaw
 
 W_N = 108.0  # one sixth of MER's weight on Mars
 DT = 0.005
