@@ -56,7 +56,7 @@ class RewardConfig:
 def planned_destination(sc: Scenario) -> tuple[float, float] | None:
     """Where the scenario's commands lead on paper (no slip): the last goto/autonav target, else the end point
     of the drive/arc/turn sequence integrated from the start pose; None if the commands do not move the rover."""
-    from rover_sim.scenario.schema import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, TurnCmd
+    from rover_sim.scenario.commands import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, TurnCmd
 
     x, y, yaw = sc.start.x_m, sc.start.y_m, math.radians(sc.start.yaw_deg)
     moved = False
@@ -176,7 +176,8 @@ class RoverEnv(gymnasium.Env):
         shadows: bool | None = None,
     ) -> None:
         from rover_sim.render.cameras import STEREO_PAIRS
-        from rover_sim.scenario.schema import Scenario, load_scenario
+        from rover_sim.scenario.loading import load_scenario
+        from rover_sim.scenario.schema import Scenario
 
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, list(overrides))
         if not cameras or any(c not in STEREO_PAIRS for c in cameras):

@@ -32,7 +32,7 @@ SOL_DETAIL_EVERY = 4
 
 if TYPE_CHECKING:
     from rover_sim.runtime.runner import Mission
-    from rover_sim.scenario.schema import AutonavCmd
+    from rover_sim.scenario.commands import AutonavCmd
     from rover_sim.world.observation import Observation
 
 HAZCAM = "hazcam_front"

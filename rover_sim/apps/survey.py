@@ -74,7 +74,8 @@ from nav.rocks import (
 from nav.rocks.range_bias import RangeBiasFit, correct_rocks, corrected_points, estimate_inverse_range_bias
 from rover_sim.runtime.onboard import VoStep
 from rover_sim.runtime.runner import Mission
-from rover_sim.scenario.schema import GotoCmd, Scenario
+from rover_sim.scenario.commands import GotoCmd
+from rover_sim.scenario.schema import Scenario
 from rover_sim.sim.drive import TICK_S
 from rover_sim.world.calibration import build_true_lens, onboard_stereo_models
 from rover_sim.world.observation import Observation, StereoImages

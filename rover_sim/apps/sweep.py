@@ -157,7 +157,7 @@ def _split_top_level(text: str) -> list[str]:
 
 def parse_grid(text: str) -> GridAxis:
     """``terrain.slope.slope_deg=10,15,20`` -> a :class:`GridAxis`; values are TOML like ``--set`` values."""
-    from rover_sim.scenario.schema import parse_override
+    from rover_sim.scenario.loading import parse_override
 
     if "=" not in text:
         raise ConfigError("--grid", text, "expected dotted.key=v1,v2,... (e.g. terrain.slope.slope_deg=10,15,20)")
@@ -189,7 +189,7 @@ def plan_jobs(
     ``overrides`` (``--set`` texts) apply to every job before the grid values. Points that resolve to the same
     scenario (``10`` and ``10.0``) are one job.
     """
-    from rover_sim.scenario.schema import load_scenario
+    from rover_sim.scenario.loading import load_scenario
 
     keys = [a.key for a in axes]
     if len(set(keys)) != len(keys):

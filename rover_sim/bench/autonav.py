@@ -18,7 +18,7 @@ from rover_sim import interrupts
 from rover_sim.bench import write_json
 from rover_sim.runtime import acceptance
 from rover_sim.runtime.run import run_scenario
-from rover_sim.scenario.schema import scenario_from_dict
+from rover_sim.scenario.loading import scenario_from_dict
 
 GOAL_DISTANCE_M = 20.0
 REACH_M = 1.0

@@ -52,7 +52,7 @@ from rover_sim.apps.survey import (
     rocks_in_true_frame,
 )
 from rover_sim.runtime import acceptance
-from rover_sim.scenario.schema import load_scenario
+from rover_sim.scenario.loading import load_scenario
 from terrains import Terrain, rock_class
 
 SCENARIO = "rock_localization"

@@ -54,7 +54,7 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
     from rover_sim.io.recording import RerunRecorder
     from rover_sim.runtime.run import sol_recording, write_outputs
     from rover_sim.runtime.runner import Mission
-    from rover_sim.scenario.schema import load_scenario
+    from rover_sim.scenario.loading import load_scenario
 
     sc = load_scenario(CASES[name], list(overrides))
     out = Path(out_dir) / name

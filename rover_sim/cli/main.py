@@ -137,7 +137,7 @@ def bench_autonav_cmd(
     with guarded():
         from rover_sim.bench.autonav import bench_autonav
         from rover_sim.bench.junit_cases import autonav_cases
-        from rover_sim.scenario.schema import plugin_overrides
+        from rover_sim.scenario.loading import plugin_overrides
 
         r = bench_autonav(path, runs=runs, first_seed=first_seed, workers=workers, seeds=seed)
         cases = autonav_cases(r)
@@ -232,7 +232,7 @@ def render_cmd(
     import math
 
     from rover_sim.bench.render import HAZCAM_PAIRS, render_to_dir
-    from rover_sim.scenario.schema import load_scenario
+    from rover_sim.scenario.loading import load_scenario
     from rover_sim.sim.assembly import Sun
 
     pairs = ("navcam", *HAZCAM_PAIRS)
@@ -334,7 +334,7 @@ def bench_suite_cmd(
     with guarded():
         from rover_sim.bench.junit_cases import suite_cases
         from rover_sim.bench.missions import bench_suite
-        from rover_sim.scenario.schema import plugin_overrides
+        from rover_sim.scenario.loading import plugin_overrides
 
         profiles = tuple(profile) if profile else None
         kw = {"fast": fast, "baseline_path": baseline, "tolerance": tolerance, "profiles": profiles}
@@ -380,7 +380,7 @@ def run_cmd(
         out, overwrite = Path("runs/latest"), True
     with guarded():
         from rover_sim.runtime.run import run_scenario
-        from rover_sim.scenario.schema import load_scenario, plugin_overrides
+        from rover_sim.scenario.loading import load_scenario, plugin_overrides
 
         overrides = plugin_overrides(vo, stereo, planner) + list(set_ or [])
         sc = load_scenario(scenario, overrides, seed)  # bad input is reported before --out is touched
@@ -405,7 +405,7 @@ def run_cmd(
 @app.command("scenarios")
 def scenarios_cmd() -> None:
     """List the scenario catalogue: name, `fast` (in the CI subset) and the first line of the description."""
-    from rover_sim.scenario.schema import catalogue, load_scenario
+    from rover_sim.scenario.loading import catalogue, load_scenario
 
     names = catalogue()
     if not names:

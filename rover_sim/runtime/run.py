@@ -14,7 +14,8 @@ from rover_sim.io.blueprint import RunLayout, blueprint_for
 from rover_sim.io.recorder_protocol import NullRecorder, Recorder
 from rover_sim.runtime.evaluator import Metrics
 from rover_sim.runtime.runner import Mission
-from rover_sim.scenario.schema import AutonavCmd, Scenario
+from rover_sim.scenario.commands import AutonavCmd
+from rover_sim.scenario.schema import Scenario
 
 
 def layout_of(sc: Scenario) -> RunLayout:
@@ -157,7 +158,7 @@ def _run(
     import time
 
     from rover_sim.io.recording import RerunRecorder
-    from rover_sim.scenario.schema import load_scenario
+    from rover_sim.scenario.loading import load_scenario
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
     if out_dir is not None:

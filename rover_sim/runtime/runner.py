@@ -35,7 +35,8 @@ from rover_sim.runtime.onboard import Onboard, VoStep, heading_rad
 from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
 from rover_sim.runtime.pointing import seek_texture
 from rover_sim.runtime.sol import BudgetSpent, SolBudget
-from rover_sim.scenario.schema import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, Scenario, SleepCmd, TurnCmd
+from rover_sim.scenario.commands import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, SleepCmd, TurnCmd
+from rover_sim.scenario.schema import Scenario
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
 from rover_sim.sim.physics import WHEEL_RADIUS_M, RoverSim
 from rover_sim.world.clock import VO_STEP_COMPUTE_S

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rover_sim.scenario.schema import SolSpec
+from rover_sim.scenario.commands import SolSpec
 from rover_sim.world.clock import DRIVE_ACTIVITIES, MissionClock
 
 MODES = ("blind", "blind_vo", "autonav")

@@ -14,7 +14,7 @@ import pytest
 from nav.trajectory import Pose
 from rover_sim.runtime.onboard import Onboard
 from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
-from rover_sim.scenario.schema import NavSpec
+from rover_sim.scenario.nav_spec import NavSpec
 from rover_sim.world.observation import NotAnObservation, Observation
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -7,7 +7,7 @@ import pytest
 
 from rover_sim.runtime.onboard import SELF_MASK_HALF_LENGTH_M, SELF_MASK_HALF_WIDTH_M, terrain_points
 from rover_sim.runtime.runner import TALL_ROCK_M, Mission
-from rover_sim.scenario.schema import scenario_from_dict
+from rover_sim.scenario.loading import scenario_from_dict
 
 START_X, GOAL_X = -2.5, 2.5
 BLOCK = {"name": "block", "x_m": 0.0, "y_m": 0.15, "length_m": 0.8, "width_m": 0.7, "height_m": 0.40, "yaw_deg": 15}

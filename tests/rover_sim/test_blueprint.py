@@ -6,7 +6,7 @@ from __future__ import annotations
 from rover_sim.cli.view import web_url
 from rover_sim.io.blueprint import RunLayout, blueprint_for, view_names
 from rover_sim.runtime.run import layout_of
-from rover_sim.scenario.schema import load_scenario
+from rover_sim.scenario.loading import load_scenario
 
 
 def test_spirit_autonav_opens_on_the_goodness_map_and_hazcams():
@@ -39,7 +39,7 @@ def test_a_run_without_vo_records_no_vo_series(tmp_path):
 
     from rover_sim.io.rrd import entity_row_counts
     from rover_sim.runtime.run import run_scenario
-    from rover_sim.scenario.schema import scenario_from_dict
+    from rover_sim.scenario.loading import scenario_from_dict
 
     sc = scenario_from_dict(TINY, overrides=["nav.vo=false", "commands.0.distance_m=0.3"])
     run_scenario(sc, tmp_path, record=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rover_sim.errors import ConfigError
-from rover_sim.scenario.schema import scenario_from_dict
+from rover_sim.scenario.loading import scenario_from_dict
 from rover_sim.sim.ephemeris import solar_declination_deg, sun_azimuth_elevation_deg
 from rover_sim.world.clock import SECONDS_PER_SOL
 from rover_sim.world.world import World

@@ -300,7 +300,7 @@ def test_flight_world_points_the_mast_with_encoder_error_and_keeps_the_commanded
     calibrated models) is built at the commanded angles; observations carry raw pairs that Onboard rectifies."""
     from rover_sim.runtime.onboard import Onboard
     from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
-    from rover_sim.scenario.schema import scenario_from_dict
+    from rover_sim.scenario.loading import scenario_from_dict
     from rover_sim.world.calibration import cameras_at_pointing
     from rover_sim.world.world import World
 

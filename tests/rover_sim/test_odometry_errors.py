@@ -19,8 +19,8 @@ from rover_sim.runtime.evaluator import (
 )
 from rover_sim.runtime.onboard import Onboard
 from rover_sim.runtime.run import run_scenario
+from rover_sim.scenario.loading import scenario_from_dict
 from rover_sim.scenario.odometry_spec import FLIGHT_DEFAULTS, OdometryErrorSpec
-from rover_sim.scenario.schema import scenario_from_dict
 from rover_sim.scenario.sensors_spec import SensorsSpec
 from rover_sim.sim.sensors import EncoderModel, ImuModel, OdometryErrors
 from rover_sim.world.observation import Observation

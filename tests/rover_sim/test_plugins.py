@@ -11,7 +11,7 @@ from test_runner import TINY  # noqa: E402 (pytest puts this folder on sys.path)
 from rover_sim.errors import PluginError
 from rover_sim.runtime.plugins import make_stereo, make_vo
 from rover_sim.runtime.runner import Mission
-from rover_sim.scenario.schema import load_scenario, scenario_from_dict
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
 
 USER_MODULE = '''
 import numpy as np

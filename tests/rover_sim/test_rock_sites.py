@@ -18,7 +18,8 @@ from rover_sim.apps.survey import (
     evaluate_extraction,
     evaluate_match,
 )
-from rover_sim.scenario.schema import GotoCmd, load_scenario, scenario_from_dict
+from rover_sim.scenario.commands import GotoCmd
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
 from terrains import ExplicitRockSpec, RockSpec, TerrainRecipe, synthesize
 
 

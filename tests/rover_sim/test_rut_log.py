@@ -91,7 +91,7 @@ def _mission_tiles(deformable: bool) -> MissionSpy:
     """purgatory_ripple's first 0.6 m (its pass bounds dropped: they need deformation)."""
     from rover_sim.resources import scenarios_dir
     from rover_sim.runtime.runner import Mission
-    from rover_sim.scenario.schema import scenario_from_dict
+    from rover_sim.scenario.loading import scenario_from_dict
 
     data = tomllib.loads((scenarios_dir() / "purgatory_ripple.toml").read_text())
     data["physics"]["deformable"] = deformable

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from nav.vo.shadow import predict_shadow, vo_feature_mask
-from rover_sim.scenario.schema import scenario_from_dict
+from rover_sim.scenario.loading import scenario_from_dict
 from rover_sim.sim.assembly import Sun
 from rover_sim.world.rover_shape import rover_shape
 from rover_sim.world.world import World

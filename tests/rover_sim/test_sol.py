@@ -8,7 +8,8 @@ import pytest
 from rover_sim.errors import ConfigError
 from rover_sim.runtime.runner import Mission
 from rover_sim.runtime.sol import BudgetSpent, SolBudget
-from rover_sim.scenario.schema import SolSpec, load_scenario, scenario_from_dict
+from rover_sim.scenario.commands import SolSpec
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
 from rover_sim.sim.assembly import Sun
 from rover_sim.world.clock import (
     AUTONAV_CYCLE_S,

@@ -12,7 +12,7 @@ import pytest
 
 from rover_sim.bench.mobility import measure_slip, parked_drift_m, slope_terrain
 from rover_sim.errors import ConfigError
-from rover_sim.scenario.schema import load_scenario
+from rover_sim.scenario.loading import load_scenario
 from rover_sim.sim import terramechanics, terramechanics_wr
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.soil_tables import mobilisation

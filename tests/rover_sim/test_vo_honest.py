@@ -11,7 +11,7 @@ import pytest
 from rover_sim.bench.missions import _regressions, _vo_case, all_passed, bench_suite, bench_vo
 from rover_sim.runtime.evaluator import false_positive_limit_m
 from rover_sim.runtime.run import run_scenario
-from rover_sim.scenario.schema import plugin_overrides, scenario_from_dict
+from rover_sim.scenario.loading import plugin_overrides, scenario_from_dict
 
 STUBS = '''
 import numpy as np

@@ -224,7 +224,8 @@ def export_scenario(
     the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``."""
     from rover_sim.runtime.run import write_outputs
     from rover_sim.runtime.runner import Mission
-    from rover_sim.scenario.schema import Scenario, load_scenario
+    from rover_sim.scenario.loading import load_scenario
+    from rover_sim.scenario.schema import Scenario
 
     for fmt in formats:
         check_options(fmt, camera, rate_hz)
