@@ -245,7 +245,8 @@ class RoverEnv(gymnasium.Env):
 
     # ------------------------------------------------------------------ world
     def _build_world(self, world_seed: int) -> None:
-        from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+        from rover_sim.render.config import ImageNoise, RenderConfig
+        from rover_sim.render.renderer import StereoRenderer, terrain_texture
         from rover_sim.sim.assembly import Sun
         from rover_sim.sim.physics import RoverSim
         from rover_sim.world.calibration import RunCalibration, build_true_lens

@@ -55,7 +55,7 @@ from rover_sim.apps.descent_scene import (
     DescentCameraConfig,
     DescentRenderer,
 )
-from rover_sim.render.renderer import ImageNoise
+from rover_sim.render.config import ImageNoise
 from rover_sim.sim.assembly import Sun
 from terrains import (
     CraterSpec,

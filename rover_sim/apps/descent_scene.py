@@ -18,8 +18,9 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.geometry import R_to_quat_wxyz
 from rover_sim.render.cameras import MJ_TO_CV
+from rover_sim.render.config import ImageNoise
 from rover_sim.render.gl import check_gl
-from rover_sim.render.renderer import LUMA_WEIGHTS, ImageNoise, bin_average, quantise
+from rover_sim.render.renderer import LUMA_WEIGHTS, bin_average, quantise
 from rover_sim.sim.assembly import Sun, hfield_encoding
 
 if TYPE_CHECKING:

@@ -162,7 +162,8 @@ class RockSiteSurvey:
         progress: Callable[[str], None] | None = None,
         keep_points: bool = False,
     ) -> None:
-        from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer
+        from rover_sim.render.config import ImageNoise, RenderConfig
+        from rover_sim.render.renderer import StereoRenderer
 
         self.sc = scenario
         self.config = config

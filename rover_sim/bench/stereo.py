@@ -34,7 +34,8 @@ from nav.stereo import (
 from rover_sim.bench import write_json
 from rover_sim.bench.stereo_flight import render_flight_pair
 from rover_sim.errors import ConfigError
-from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+from rover_sim.render.config import ImageNoise, RenderConfig
+from rover_sim.render.renderer import StereoRenderer, terrain_texture
 from rover_sim.runtime import acceptance
 from rover_sim.sim.physics import RoverSim
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, TerrainRecipe, synthesize

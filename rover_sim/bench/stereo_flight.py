@@ -20,8 +20,9 @@ from nav.camera import PinholeCamera
 from nav.lens import CameraModel
 from nav.rectify import StereoCalibration, rectification
 from rover_sim.render.cameras import camera_model
+from rover_sim.render.config import RenderConfig
 from rover_sim.render.imaging import ImagingSpec
-from rover_sim.render.renderer import RenderConfig, StereoRenderer
+from rover_sim.render.renderer import StereoRenderer
 from rover_sim.scenario.lens_spec import LensErrorSpec
 from rover_sim.world.calibration import RunCalibration, build_true_lens
 

@@ -13,8 +13,6 @@ from nav.vo import SanityConstraints, VoParams
 from rover_sim.scenario.base import Spec
 
 BUILTIN = "builtin"
-
-
 IMPL_DESCRIPTION = (
     '"builtin", an import path "package.module:Class", or the name of an entry point in the group "rover_sim.plugins"'
 )

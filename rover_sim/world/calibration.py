@@ -84,14 +84,15 @@ class RunCalibration:
     def true_model(self, pinhole: PinholeCamera) -> CameraModel:
         """The true raw camera for ``pinhole`` (MJCF camera, any size): the lens design with ``T_rover_cam`` =
         ``pinhole.T_rover_cam`` turned by the mounting rotation."""
-        model = nominal_model(pinhole, self.spec)
+        model = nominal_model(pinhole, self.spec.navcam_r, self.spec.hazcam_k)
         T = np.asarray(pinhole.T_rover_cam, dtype=float).copy()
         T[:3, :3] = T[:3, :3] @ self.mount[pinhole.name]
         return replace(model, T_rover_cam=T)  # type: ignore[type-var]
 
     def render_model(self, pinhole: PinholeCamera) -> CameraModel:
         """The true raw camera with only its mounting rotation as ``T_rover_cam`` (relative to the MJCF camera)."""
-        return with_rotation(nominal_model(pinhole, self.spec), self.mount[pinhole.name])
+        nominal = nominal_model(pinhole, self.spec.navcam_r, self.spec.hazcam_k)
+        return with_rotation(nominal, self.mount[pinhole.name])
 
     def onboard_model(self, pinhole: PinholeCamera) -> CameraModel:
         """What the calibration says the camera is (``pinhole``: the MJCF camera at the commanded pointing)."""
@@ -187,9 +188,8 @@ def build_true_lens(  # noqa: ANN201
     names = [f"{p}_{s}" for p in pairs for s in ("left", "right")]
     models = {n: calibration.render_model(camera_model(model, data, n, native_px, native_px)) for n in names}
     spec = calibration.spec
-    if render_oversample is not None:
-        spec = spec.model_copy(update={"render_oversample": render_oversample})
-    return TrueLens(models, spec)
+    oversample = spec.render_oversample if render_oversample is None else render_oversample
+    return TrueLens(models, oversample, spec.hazcam_max_off_axis_deg)
 
 
 def render_rectified(renderer, calibration: RunCalibration, pair: str) -> tuple[np.ndarray, np.ndarray, StereoRig]:  # noqa: ANN001

@@ -20,7 +20,8 @@ from nav.camera import StereoRig
 from nav.geometry import R_to_quat_wxyz
 from nav.rectify import StereoCalibration
 from nav.trajectory import Pose
-from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoFrame, StereoRenderer, terrain_texture
+from rover_sim.render.config import ImageNoise, RenderConfig
+from rover_sim.render.renderer import StereoFrame, StereoRenderer, terrain_texture
 from rover_sim.scenario.schema import Scenario
 from rover_sim.sim.assembly import Sun
 from rover_sim.sim.physics import RoverSim

@@ -164,7 +164,7 @@ def test_rendered_marker_lands_where_the_camera_model_projects_it(marker_rendere
 
 @pytest.mark.render
 def test_rendering_is_deterministic(marker_renderer):
-    from rover_sim.render.renderer import ImageNoise
+    from rover_sim.render.config import ImageNoise
 
     T = _pose(DescentTrajectory(DescentConditions.sample(1)).R_world_cam(0.0), np.array([0.0, 0.0, 2000.0]))
     sun = Sun(azimuth_deg=30.0, elevation_deg=50.0, shadows=False)

@@ -373,8 +373,8 @@ def test_oversampled_true_lens_integrates_each_raw_pixel_without_shifting_it() -
 
     pins = [PinholeCamera.from_fov(f"navcam_{s}", 64, 64, 45.0) for s in ("left", "right")]
     models = {p.name: CahvorCamera.from_pinhole(p, r=(0.0, -0.01, 0.003)) for p in pins}
-    point = TrueLens(models, LensErrorSpec(**{**FLIGHT_DEFAULTS, "render_oversample": 1.0}))
-    area = TrueLens(models, LensErrorSpec(**{**FLIGHT_DEFAULTS, "render_oversample": 2.0}))
+    point = TrueLens(models, 1.0, LensErrorSpec().hazcam_max_off_axis_deg)
+    area = TrueLens(models, 2.0, LensErrorSpec().hazcam_max_off_axis_deg)
     assert point.area_sigma_px == 0.0 and area.area_sigma_px == pytest.approx(2.0 / np.sqrt(12.0))
     px = area.views["navcam"].px
     assert px >= 2 * 64
