@@ -19,9 +19,7 @@ import numpy as np
 
 from nav.gestalt import Arc as GestaltArc
 from nav.gestalt import arc_pose
-from rover_sim.runtime.onboard import (
-    PlanCycle,
-)
+from rover_sim.runtime.onboard import PlanCycle
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
 from rover_sim.world.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
 

@@ -51,10 +51,7 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.dimes import DescentImage
 from nav.geometry import so3_exp
-from rover_sim.apps.descent_scene import (
-    DescentCameraConfig,
-    DescentRenderer,
-)
+from rover_sim.apps.descent_scene import DescentCameraConfig, DescentRenderer
 from rover_sim.render.config import ImageNoise
 from rover_sim.sim.assembly import Sun
 from terrains import (

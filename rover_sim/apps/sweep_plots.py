@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from rover_sim.apps.sweep import GridAxis, Job, JobResult
+    from rover_sim.apps.sweep_jobs import GridAxis, Job, JobResult
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from rover_sim.apps.sweep import SweepResult, default_workers, run_sweep
+from rover_sim.apps.sweep import default_workers, run_sweep
+from rover_sim.apps.sweep_jobs import SweepResult
 from rover_sim.bench import write_json
 from rover_sim.runtime import acceptance
 

@@ -19,9 +19,6 @@ import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything impor
 from rover_sim.apps import sweep
 from rover_sim.apps.sweep import (
     METRIC_COLUMNS,
-    DaskUnavailable,
-    Job,
-    JobResult,
     load_completed,
     parse_grid,
     plan_jobs,
@@ -29,7 +26,8 @@ from rover_sim.apps.sweep import (
     result_columns,
     run_sweep,
 )
-from rover_sim.errors import ConfigError
+from rover_sim.apps.sweep_jobs import Job, JobResult
+from rover_sim.errors import ConfigError, DaskUnavailable, SchedulerUnreachable
 
 TINY_TOML = """
 name = "tiny_sweep"
@@ -185,7 +183,7 @@ def test_missing_dask_says_how_to_install_it(tiny, tmp_path, monkeypatch) -> Non
 def test_unreachable_scheduler_is_a_clear_error(tiny, tmp_path, monkeypatch) -> None:
     pytest.importorskip("distributed", reason="the Dask backend needs the rover-sim[dask] extra")
     monkeypatch.setattr(sweep, "DASK_CONNECT_TIMEOUT_S", 0.5)
-    with pytest.raises(sweep.SchedulerUnreachable, match="dask scheduler"):
+    with pytest.raises(SchedulerUnreachable, match="dask scheduler"):
         run_sweep(tiny, [GRID[0]], 1, tmp_path, scheduler="tcp://127.0.0.1:9", job_fn=fake_job)
 
 
