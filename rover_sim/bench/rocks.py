@@ -37,15 +37,11 @@ import numpy as np
 
 from nav.epipolar import EpipolarCheck
 from nav.rocks import ROCK_SHAPES
-from rover_sim.apps.survey import (
+from rover_sim.apps.survey import RangeCalibration, RockSiteSurvey, SurveyConfig, adjust_chain, calibrate_range_bias
+from rover_sim.apps.survey_eval import (
     ExtractionEval,
     MatchEval,
-    RangeCalibration,
-    RockSiteSurvey,
-    SurveyConfig,
-    adjust_chain,
     associate,
-    calibrate_range_bias,
     evaluate_chain,
     evaluate_extraction,
     evaluate_match,
@@ -231,7 +227,7 @@ def _range_bias(cal: RangeCalibration, raw_total: ExtractionEval, raw_sites: lis
 
 def _by_class(sites: list, terrain: Terrain, max_range_m: float = 30.0, min_height_m: float = 0.2) -> dict:
     """Recall, precision and median model RMS per rock class ("analytic", "irregular"), summed over the sites (the
-    same targets and association as :func:`rover_sim.apps.survey.evaluate_extraction`)."""
+    same targets and association as :func:`rover_sim.apps.survey_eval.evaluate_extraction`)."""
     truth = terrain.rocks
     classes = np.array([rock_class(r) for r in truth])
     txy = np.array([[r.x_m, r.y_m] for r in truth]).reshape(-1, 2)

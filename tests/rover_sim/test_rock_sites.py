@@ -10,14 +10,8 @@ import pytest
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.rocks import ExtractedRock, LocalPlane, PanoramaStereoParams, Pose4, RockModel, RockPeak, SiteMatch
 from nav.trajectory import Pose
-from rover_sim.apps.survey import (
-    VO_SYSTEMATIC_SIGMA_FRAC,
-    RockSiteSurvey,
-    SiteSurvey,
-    SurveyConfig,
-    evaluate_extraction,
-    evaluate_match,
-)
+from rover_sim.apps.survey import VO_SYSTEMATIC_SIGMA_FRAC, RockSiteSurvey, SiteSurvey, SurveyConfig
+from rover_sim.apps.survey_eval import evaluate_extraction, evaluate_match
 from rover_sim.scenario.commands import GotoCmd
 from rover_sim.scenario.loading import load_scenario, scenario_from_dict
 from terrains import ExplicitRockSpec, RockSpec, TerrainRecipe, synthesize
