@@ -22,7 +22,6 @@ from collections.abc import Callable
 
 import numpy as np
 
-from nav.geometry import R_to_rpy
 from nav.trajectory import Pose, Trajectory
 from rover_sim import interrupts
 from rover_sim.errors import PhysicsDiverged, PluginError
@@ -34,6 +33,7 @@ from rover_sim.runtime.evaluator import Evaluator, Metrics, VoStepRecord
 from rover_sim.runtime.onboard import Onboard, VoStep, heading_rad
 from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
 from rover_sim.runtime.pointing import seek_texture
+from rover_sim.runtime.runner_recording import RunRecording
 from rover_sim.runtime.sol import BudgetSpent, SolBudget
 from rover_sim.scenario.commands import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, SleepCmd, TurnCmd
 from rover_sim.scenario.schema import Scenario
@@ -43,8 +43,6 @@ from rover_sim.world.clock import VO_STEP_COMPUTE_S
 from rover_sim.world.observation import Observation
 from rover_sim.world.rover_shape import rover_shape
 from rover_sim.world.world import World
-
-__all__ = ["Halt", "Metrics", "Mission", "TALL_ROCK_M", "VoStepRecord"]
 
 GOTO_HEADING_TOLERANCE_RAD = math.radians(5.0)
 MAST_SETTLE_S = 2.0  # a mast command waits this long for the servos before imaging
@@ -66,8 +64,9 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
-class Mission:
-    """One scenario run. ``run()`` returns :class:`Metrics`; :func:`rover_sim.io.outputs.write_outputs` writes them."""
+class Mission(RunRecording):
+    """One scenario run. ``run()`` returns :class:`Metrics`; :func:`rover_sim.runtime.run.write_outputs` writes them.
+    What it logs to the recorder beyond events and poses is in :class:`RunRecording`."""
 
     def __init__(
         self,
@@ -411,79 +410,6 @@ class Mission:
     def event(self, text: str, level: str = "INFO") -> None:
         self.events.append(f"[{self.sim.time_s:8.2f}s] {level}: {text}")
         self.rec.log_event(self.sim.time_s, self.step, text, level)
-
-    def log_terrain_tiles(self) -> None:
-        """A streamed site: log the tiles of the current window not logged before (each tile once)."""
-        self._terrain_version = self.sim.terrain_version
-        if self.sim.streamer is not None:
-            for key, tile_terrain in self.sim.streamer.new_tiles(self.terrain):
-                self.rec.log_terrain_tile(key, tile_terrain)
-
-    def log_static(self) -> None:
-        if self.sim.streamer is not None:
-            self.log_terrain_tiles()
-        elif self.sim.deform is not None:  # the ground as tiles re-logged where ruts change them (io/rut_log.py)
-            self.rec.log_terrain(self.terrain, ground=False)
-            self.rut_log = RutLog(self.sim, self.rec)
-            self.rut_log.log_all(self.sim.time_s, self.step)
-        else:
-            self.rec.log_terrain(self.terrain)
-        for z in self.sc.keep_out:
-            self.rec.log_keep_out(z.name, z.x_m, z.y_m, z.radius_m, float(self.terrain.height_at(z.x_m, z.y_m)))
-        self.rec.log_camera(self.sc.nav.camera, self.world.onboard_rig(self.sc.nav.camera), self.sim.time_s)
-
-    def log_tracks(self, t: float) -> None:
-        ev = self.evaluator
-        for name, poses in (("truth", ev.truth), ("dead_reckoning", ev.dr_poses)):
-            self.rec.log_trajectory(name, t, self.step, poses.positions_xyz_m)
-        if self.onboard.vo is not None:
-            self.rec.log_trajectory("vo", t, self.step, ev.onboard_poses.positions_xyz_m)
-        truth = ev.truth[-1]
-        rpy = R_to_rpy(truth.R_world_rover)
-        gt = self.sim.ground_truth()
-        errors = {
-            "position_error_m/dead_reckoning": float(
-                np.linalg.norm(ev.dr_poses[-1].position_xyz_m - truth.position_xyz_m)
-            )
-        }
-        if self.onboard.vo is not None:
-            errors["position_error_m/vo"] = float(
-                np.linalg.norm(ev.onboard_poses[-1].position_xyz_m - truth.position_xyz_m)
-            )
-        slip = float(np.nanmean(gt.wheel_slip)) if np.isfinite(gt.wheel_slip).any() else math.nan
-        self.rec.log_scalars(
-            t,
-            self.step,
-            {
-                "tilt_deg": gt.tilt_deg,
-                "roll_deg": math.degrees(rpy[0]),
-                "pitch_deg": math.degrees(rpy[1]),
-                **errors,
-                "wheel_slip_pct": 100.0 * slip,
-                "sinkage_mean_m": float(np.mean(gt.wheel_sinkage_m)),
-            },
-        )
-
-    def log_frame(self, obs, camera: str, res) -> None:  # noqa: ANN001
-        pair = self.onboard.rectified(obs, camera)
-        t = self.sim.time_s
-        self.rec.log_camera(camera, pair.rig, t)
-        disparity = None
-        if self.rec.wants_images():
-            # dense stereo of the VO pair, for the recording only (placed with the onboard pose)
-            ri = self.onboard.range_image(obs, camera)
-            disparity = ri.disparity_px
-            from nav.camera import transform_points
-
-            pts = transform_points(self.onboard.pose.as_matrix(), ri.points_rover_m())
-            near = np.linalg.norm(pts[:, :2] - pts[:, :2].mean(0), axis=1) < 15
-            self.rec.log_points(camera, t, self.step, pts[near])
-        self.rec.log_stereo_images(camera, t, self.step, pair.left_u8, pair.right_u8, disparity)
-        tracks = getattr(res, "tracks", None)
-        if tracks is not None and len(tracks):
-            inliers = getattr(res, "inliers", None)
-            inl = inliers if inliers is not None else np.ones(len(tracks), bool)
-            self.rec.log_vo_features(camera, t, self.step, tracks.uv_prev_left, tracks.uv_cur_left, inl)
 
     # ------------------------------------------------------------------ evaluation
     def metrics(self, wall_s: float) -> Metrics:
