@@ -35,7 +35,7 @@ cells changed since the last render (:meth:`DeformableTerrain.pop_dirty_cells`) 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -53,17 +53,33 @@ from rover_sim.sim.wr_kernel import (
 )
 
 if TYPE_CHECKING:
-    from rover_sim.sim.physics import RoverSim
+    import mujoco
+
+    from rover_sim.sim.terramechanics_wr import WheelSoilLaw
+    from terrains import Terrain
 
 SINK_FILTER_S = 0.5
 REPOSE_DEG = 33.0  # slope of a rut's walls: loose sand's angle of repose, 30-35 deg (Mars: Atwood-Genco et al. 2015)
 _RENDER, _LOG = 0, 1  # rows of the dirty-cell boxes: one per consumer
 
 
+class DeformingSim(Protocol):
+    """What the deformable ground reads of the physics that owns it (:class:`rover_sim.sim.physics.RoverSim`): the
+    compiled model and its data, the terrain, the Wong-Reece law and the physics step."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    terrain: Terrain
+    law: WheelSoilLaw
+
+    @property
+    def timestep_s(self) -> float: ...
+
+
 class DeformableTerrain:
     """The heightfield of ``sim`` made deformable; ``heights_m()`` is the current surface (same grid as the terrain)."""
 
-    def __init__(self, sim: RoverSim, deformable_materials: tuple[bool, ...]) -> None:
+    def __init__(self, sim: DeformingSim, deformable_materials: tuple[bool, ...]) -> None:
         m, t = sim.model, sim.terrain
         self.model = m
         hid = m.hfield("terrain").id
@@ -132,7 +148,7 @@ class DeformableTerrain:
         return i, j
 
     # ------------------------------------------------------------------ per physics step
-    def after_law(self, sim: RoverSim, sd: np.ndarray, mats: np.ndarray) -> None:
+    def after_law(self, sim: DeformingSim, sd: np.ndarray, mats: np.ndarray) -> None:
         """Called by RoverSim after the soil law each step (``sd`` its sensor block, ``mats`` the material under
         each wheel): presink for the law, ruts where a wheel has moved (compiled: wr_kernel.deform_after_law)."""
         if not self.enabled:
