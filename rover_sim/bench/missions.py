@@ -23,7 +23,8 @@ from rover_sim import interrupts
 from rover_sim.bench import write_json
 from rover_sim.resources import suite_baseline_path
 from rover_sim.runtime import acceptance
-from rover_sim.runtime.run import Metrics, run_scenario
+from rover_sim.runtime.evaluator import Metrics
+from rover_sim.runtime.run import run_scenario
 from rover_sim.scenario.loading import catalogue, load_scenario, plugin_overrides, scenario_from_dict
 from rover_sim.scenario.schema import Scenario
 from rover_sim.scenario.sensors_spec import Profile
