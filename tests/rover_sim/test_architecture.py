@@ -150,7 +150,8 @@ def test_layers():
             theirs = _layer(imported)
             if theirs is not None and theirs > own and (name, imported) not in UPWARD:
                 bad.append(f"{name} imports {imported}")
-    assert not bad, "imports against the layers (" + " < ".join(LAYERS) + "):\n" + "\n".join(bad)
+    order = " < ".join(", ".join(p for p, n in LAYERS.items() if n == level) for level in sorted(set(LAYERS.values())))
+    assert not bad, f"imports against the layers ({order}):\n" + "\n".join(bad)
 
 
 def test_world_packages_import_no_runner():
