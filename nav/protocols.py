@@ -22,6 +22,7 @@ import numpy as np
 if TYPE_CHECKING:
     from nav.camera import StereoRig
     from nav.gestalt import Arc, Decision
+    from nav.globalloc import GlobalLocResult, OrbitalMap, PanoramaView
     from nav.vo import VoResult
 
 # the built-in statuses; a plugin may use its own refusal strings
@@ -103,6 +104,33 @@ class Planner(Protocol):
     def step(self, points_world: np.ndarray, pose_xy_yaw: np.ndarray, goal_xy: np.ndarray) -> Decision: ...
 
 
+@runtime_checkable
+class GlobalLocalizer(Protocol):
+    """Global localisation at a stop against orbital products (Mars 2020's Mars Global Localization; Li et al.'s
+    rocks as the common features): one :meth:`localize` per navcam panorama.
+
+    ``views`` are the panorama's rectified pairs, each with its calibrated rig (:class:`nav.globalloc.PanoramaView`);
+    ``R_world_rover`` the onboard attitude (IMU roll and pitch, the onboard yaw); ``prior_xy_yaw`` the onboard pose
+    (x, y [m], yaw [rad]) and ``prior_covariance`` its 3x3 uncertainty; ``orbital`` the orthoimage and DEM with their
+    stated error model (:class:`nav.globalloc.OrbitalMap`). The result (:class:`nav.globalloc.GlobalLocResult`):
+
+    - ``status`` (str): ``"ok"`` for a fix; any other string is a refusal (the onboard pose stands) with a ``reason``.
+    - ``xy_yaw`` (3 floats, required when ``status == "ok"``): the fix in the map frame.
+    - ``covariance`` (3x3, required when ``status == "ok"``): symmetric, positive semi-definite, finite.
+
+    A refusal is always allowed; a wrong fix is the one thing a global localiser must not return.
+    """
+
+    def localize(
+        self,
+        views: list[PanoramaView],
+        R_world_rover: np.ndarray,
+        prior_xy_yaw: np.ndarray,
+        prior_covariance: np.ndarray,
+        orbital: OrbitalMap,
+    ) -> GlobalLocResult: ...
+
+
 # ------------------------------------------------------------------------------------------------------------
 # Result checks (the simulator runs these on every plugin answer)
 # ------------------------------------------------------------------------------------------------------------
@@ -167,3 +195,23 @@ def check_decision(decision: object, n_arcs: int) -> None:
     drive = getattr(decision, "drive_m", None)
     if drive is not None and (not np.isfinite(drive) or drive <= 0 or drive > 5.0):
         raise PluginContractError("drive_m", f"expected None or 0 < drive_m <= 5 m, got {drive!r}")
+
+
+def check_globalloc_result(res: object) -> None:
+    """Raise :class:`PluginContractError` unless ``res`` honours the :class:`GlobalLocalizer` result contract."""
+    for name in ("status", "reason", "xy_yaw", "covariance"):
+        if not hasattr(res, name):
+            raise PluginContractError(name, f"the result ({type(res).__name__}) has no '{name}' attribute")
+    status = res.status  # type: ignore[attr-defined]
+    if not isinstance(status, str) or not status:
+        raise PluginContractError("status", f"expected a non-empty string, got {status!r}")
+    if status != "ok":
+        return
+    xy = res.xy_yaw  # type: ignore[attr-defined]
+    if not isinstance(xy, np.ndarray) or xy.shape != (3,) or not np.all(np.isfinite(xy)):
+        raise PluginContractError("xy_yaw", f"expected 3 finite floats when status is 'ok', got {xy!r:.80}")
+    C = res.covariance  # type: ignore[attr-defined]
+    if not isinstance(C, np.ndarray) or C.shape != (3, 3) or not np.all(np.isfinite(C)):
+        raise PluginContractError("covariance", "expected a finite 3x3 array when status is 'ok'")
+    if not np.allclose(C, C.T, rtol=1e-6, atol=1e-12) or np.linalg.eigvalsh(0.5 * (C + C.T)).min() < -1e-12:
+        raise PluginContractError("covariance", "not symmetric positive semi-definite")

@@ -180,10 +180,10 @@ def run_job(job: Job, jobs_dir: str) -> JobResult:
         return JobResult(job.job_id, "ok", metrics=metrics.deterministic_dict())  # = its metrics.json
     except Exception as e:  # noqa: BLE001 - isolation boundary: any failure of one job is reported, the sweep goes on
         (job_dir / "metrics.json").unlink(missing_ok=True)  # outputs written before the failure are not a result
-        return _failed(job, e)
+        return failed_result(job, e)
 
 
-def _failed(job: Job, error: BaseException, why: str = "") -> JobResult:
+def failed_result(job: Job, error: BaseException, why: str = "") -> JobResult:
     """A failed result: the error on one line (for results.csv) and the full traceback (for error.json)."""
     text = "; ".join(line.strip() for line in f"{why}{type(error).__name__}: {error}".splitlines() if line.strip())
     return JobResult(job.job_id, "failed", error=text, traceback="".join(traceback.format_exception(error)))
@@ -272,7 +272,7 @@ def _run_on_pool(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, workers: int
             except BrokenProcessPool as e:
                 yield (
                     job,
-                    _failed(
+                    failed_result(
                         job,
                         e,
                         "a worker process crashed, taking this job with it (re-run the sweep "
@@ -280,7 +280,7 @@ def _run_on_pool(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, workers: int
                     ),
                 )
             except Exception as e:  # noqa: BLE001 - e.g. a result that cannot be pickled: this job fails, not all
-                yield job, _failed(job, e)
+                yield job, failed_result(job, e)
         finished = True
     finally:
         if finished:
@@ -319,7 +319,7 @@ def _run_on_dask(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, scheduler: s
                     err = fut.exception()
                 except Exception as e:  # noqa: BLE001 - a cancelled future raises instead of returning its error
                     err = e
-                yield job, _failed(job, err, f"Dask task {fut.status} (retries: {DASK_RETRIES}): ")
+                yield job, failed_result(job, err, f"Dask task {fut.status} (retries: {DASK_RETRIES}): ")
     finally:
         client.close()
 
@@ -329,6 +329,47 @@ def _run_on_dask(jobs: Sequence[Job], jobs_dir: str, job_fn: JobFn, scheduler: s
 
 def default_workers() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
+def run_jobs(
+    jobs: Sequence[Job],
+    jobs_dir: Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    job_fn: JobFn = run_job,
+    on_result: OnResult = _no_progress,
+    reuse: bool = True,
+) -> list[JobResult]:
+    """Steps 2-3 of :func:`run_sweep` for any list of jobs (several scenarios may share one list): each job's
+    ``job.json`` is written, a completed job is read back instead of run again (``reuse``), the rest run on the
+    executor. Results in ``jobs`` order; the same whatever the executor or worker count (each job is its own run)."""
+    jobs_dir.mkdir(parents=True, exist_ok=True)
+    results: dict[str, JobResult] = {}
+    for job in jobs:
+        _write_json(
+            jobs_dir / job.job_id / "job.json",
+            {"job_id": job.job_id, "params": job.params, "seed": job.seed, "scenario": job.scenario},
+        )
+        done = load_completed(jobs_dir / job.job_id) if reuse else None
+        if done is not None:
+            results[job.job_id] = JobResult(job.job_id, "ok", metrics=done, cached=True)
+            on_result(len(results), len(jobs), job, results[job.job_id])
+    pending = [j for j in jobs if j.job_id not in results]
+    n_workers = default_workers() if workers is None else workers
+    if not pending:
+        stream: Iterator[tuple[Job, JobResult]] = iter(())
+    elif scheduler is not None:
+        stream = _run_on_dask(pending, str(jobs_dir), job_fn, scheduler)
+    elif n_workers <= 0:
+        stream = _run_in_process(pending, str(jobs_dir), job_fn)
+    else:
+        stream = _run_on_pool(pending, str(jobs_dir), job_fn, n_workers)
+    for job, result in stream:
+        _record(jobs_dir, job, result)
+        results[job.job_id] = result
+        on_result(len(results), len(jobs), job, result)
+    return [results[j.job_id] for j in jobs]
 
 
 def run_sweep(
@@ -366,33 +407,7 @@ def run_sweep(
             "jobs": {j.job_id: {"params": j.params, "seed": j.seed} for j in jobs},
         },
     )
-    results: dict[str, JobResult] = {}
-    for job in jobs:
-        _write_json(
-            jobs_dir / job.job_id / "job.json",
-            {"job_id": job.job_id, "params": job.params, "seed": job.seed, "scenario": job.scenario},
-        )
-        done = load_completed(jobs_dir / job.job_id)
-        if done is not None:
-            results[job.job_id] = JobResult(job.job_id, "ok", metrics=done, cached=True)
-            on_result(len(results), len(jobs), job, results[job.job_id])
-    pending = [j for j in jobs if j.job_id not in results]
-
-    n_workers = default_workers() if workers is None else workers
-    if not pending:
-        stream: Iterator[tuple[Job, JobResult]] = iter(())
-    elif scheduler is not None:
-        stream = _run_on_dask(pending, str(jobs_dir), job_fn, scheduler)
-    elif n_workers <= 0:
-        stream = _run_in_process(pending, str(jobs_dir), job_fn)
-    else:
-        stream = _run_on_pool(pending, str(jobs_dir), job_fn, n_workers)
-    for job, result in stream:
-        _record(jobs_dir, job, result)
-        results[job.job_id] = result
-        on_result(len(results), len(jobs), job, result)
-
-    ordered = [results[j.job_id] for j in jobs]
+    ordered = run_jobs(jobs, jobs_dir, workers=workers, scheduler=scheduler, job_fn=job_fn, on_result=on_result)
     csv_path = write_results_csv(out / "results.csv", axes, jobs, ordered)
     plot_paths = plot_sweep(out / "plots", axes, jobs, ordered) if plots else []
     return SweepResult(out, axes, jobs, ordered, time.perf_counter() - t0, csv_path, plot_paths)

@@ -3,7 +3,7 @@ a failure's message is the unmet criterion with the measured value. Written by :
 
 from __future__ import annotations
 
-from rover_sim.io.junit import Case, case, scenario_case
+from rover_sim.io.junit import Case, case
 from rover_sim.runtime import acceptance
 
 
@@ -41,30 +41,6 @@ def mobility_cases(result: dict) -> list[Case]:
     for c in result["checks"]:
         msg = f"{c['measured']} (acceptance {c['acceptance']})"
         out.append(case(c["name"], "bench.slip.wong_reece", c["ok"], msg))
-    return out
-
-
-def vo_cases(results: dict) -> list[Case]:
-    """One case per VO case for MER VO (flight profile), and per case for each plugin (``bench.vo.<plugin>``);
-    the ideal-profile and full-pose comparison runs are reported, not judged."""
-    from rover_sim.bench.missions import COMPARISON_KEYS
-
-    out = [
-        scenario_case(r, "bench.vo.builtin", name) for name, r in results.items() if name not in COMPARISON_KEYS
-    ]
-    for plugin, per in results.get("plugins", {}).items():
-        out += [scenario_case(r, f"bench.vo.{plugin}", case_name) for case_name, r in per.items()]
-    return out
-
-
-def suite_cases(rows: list[dict], label: str = "builtin") -> list[Case]:
-    """One case per scenario; a regression past the baseline is a failure too."""
-    out = []
-    for r in rows:
-        c = scenario_case(r, f"bench.suite.{label}")
-        if r.get("regressions") and c.failure is None:
-            c = Case(c.name, c.classname, failure="; ".join(r["regressions"]), time_s=c.time_s)
-        out.append(c)
     return out
 
 

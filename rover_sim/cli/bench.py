@@ -183,6 +183,43 @@ def bench_rocks_cmd(
     finish(junit, "bench rocks", rocks_cases(result))
 
 
+SeedsOpt = Annotated[
+    str | None,
+    typer.Option("--seeds", help="A count N (the first N of the command's seed set), a range A-B or a list A,B,C."),
+]
+PerturbOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--perturb",
+        help="EPS[:SEED]: add a seeded perturbation of EPS metres and radians to each run's settled initial state "
+        "(what another CPU or build does to a chaotic drive).",
+    ),
+]
+WorkersOpt = Annotated[
+    int | None, typer.Option("--workers", min=0, help="Local worker processes (0: in this process) [default: CPUs].")
+]
+SchedulerOpt = Annotated[
+    str | None, typer.Option("--scheduler", help="Run the jobs on this Dask scheduler (tcp://host:port) instead.")
+]
+
+
+@bench_app.command("report")
+def bench_report_cmd(
+    path: Annotated[Path, typer.Argument(help="A `bench suite --json` or `bench vo --json` file.")],
+) -> None:
+    """Print a benchmark JSON as markdown tables (median [90 % CI] per figure), with seeds, profile, cell size and
+    machine: the docs' benchmark pages are made this way from committed JSON."""
+    import json as _json
+
+    from rover_sim.bench.report import markdown
+
+    try:
+        data = _json.loads(path.read_text())
+        typer.echo(markdown(data))
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        bad_input(ValueError(f"{path}: not a bench suite/vo JSON ({type(e).__name__}: {e})"))
+
+
 @bench_app.command("vo")
 def bench_vo_cmd(
     json: JsonOpt = None,
@@ -193,60 +230,89 @@ def bench_vo_cmd(
     quick: Annotated[
         bool, typer.Option("--quick", help="Flight profile only: skip the ideal-profile and full-pose VO reruns.")
     ] = False,
+    seeds: SeedsOpt = None,
+    perturb: PerturbOpt = None,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
     junit: JunitOpt = None,
 ) -> None:
-    """VO cases: MSSTB rock course, 30 m slope, featureless soil, rover shadow, flat benign ground; MER VO beside
-    any --vo plugins. Each case runs on the flight sensor profile, and (unless --quick) again on the ideal profile
-    and with the full-pose VO update; the tables say which."""
-    from rover_sim.bench.missions import VO_CASES
+    """VO cases over seeds: MSSTB rock course, 30 m slope, featureless soil, rover shadow, flat benign ground; MER VO
+    beside any --vo plugins on the same seeds (default: the first 8 of the published set). Each case runs on the
+    flight sensor profile, and (unless --quick) again on the ideal profile and with the full-pose VO update; every
+    cell is a median [90 % CI] over the seeds."""
+    from rover_sim.bench.vo import VO_CASES
 
     for c in case or []:
         if c not in VO_CASES:
             bad_input(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
     with guarded():
-        from rover_sim.bench.junit_cases import vo_cases
-        from rover_sim.bench.missions import bench_vo
+        from rover_sim.bench.seeded import parse_perturb
+        from rover_sim.bench.seeds import parse_seeds
+        from rover_sim.bench.suite import PUBLISHED_SEEDS, interrupt_of
+        from rover_sim.bench.vo import bench_vo, junit_cases
 
-        results = bench_vo(str(json) if json else None, plugins=vo or None, cases=case or None, quick=quick)
-    finish(junit, "bench vo", vo_cases(results))
+        chosen = parse_seeds(seeds, "published", PUBLISHED_SEEDS)
+        stacks, _ = bench_vo(str(json) if json else None, chosen, plugins=vo or None, cases=case or None,
+                             quick=quick, perturb=parse_perturb(perturb), workers=workers,
+                             scheduler=scheduler)  # fmt: skip
+        cases = junit_cases(stacks)
+        stop = interrupt_of(stacks)
+        if stop is not None:
+            from rover_sim.io.junit import write_junit
+
+            write_junit(junit, "bench vo", cases)
+            raise stop
+    finish(junit, "bench vo", cases)
 
 
 @bench_app.command("suite")
 def bench_suite_cmd(
     json: JsonOpt = None,
-    fast: Annotated[bool, typer.Option("--fast", help="Only the CI subset (scenarios with fast = true).")] = False,
-    update_baseline: Annotated[
-        bool, typer.Option("--update-baseline", help="Store these results as baseline.")
+    fast: Annotated[
+        bool, typer.Option("--fast", help="The CI gate: scenarios with fast = true, on the gate seeds, flight profile.")
     ] = False,
+    seeds: SeedsOpt = None,
+    update_baseline: Annotated[
+        bool,
+        typer.Option(
+            "--update-baseline", help="Record these seeds as the baseline (plus a perturbed run for the spread)."
+        ),
+    ] = False,
+    baseline: Annotated[
+        Path | None,
+        typer.Option("--baseline", help="Gate against this baseline file (yours) instead of the committed one."),
+    ] = None,
     vo: VoOpt = None,
     stereo: StereoOpt = None,
     planner: PlannerOpt = None,
-    junit: JunitOpt = None,
-    baseline: Annotated[
-        Path | None,
-        typer.Option("--baseline", help="Compare with this baseline file (yours; relative tolerances) instead."),
-    ] = None,
-    tolerance: Annotated[
-        float, typer.Option("--tolerance", min=0.0, max=10.0, help="Relative tolerance for --baseline.")
-    ] = 0.10,
-    profile: Annotated[
+    replay_vo: Annotated[
         list[str] | None,
         typer.Option(
-            "--profile",
-            help="Sensor profile(s) to run, flight or ideal (repeatable); default both, with --fast only the "
-            "profile the baseline was recorded on.",
+            "--replay-vo",
+            help=f"Also run this visual odometer ({IMPL_HELP}) on the built-in stack's identical inputs (open loop, "
+            "paired: every seed's images and IMU); reported and gated in the JSON, not in the exit status. "
+            "Repeatable.",
         ),
     ] = None,
+    perturb: PerturbOpt = None,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
+    png: Annotated[Path | None, typer.Option("--png", help="With a plugin: the scorecard's box plots.")] = None,
+    junit: JunitOpt = None,
+    profile: Annotated[
+        list[str] | None,
+        typer.Option("--profile", help="Sensor profile(s) to run, flight or ideal (repeatable) [default: both; "
+                     "--fast: flight]."),
+    ] = None,
 ) -> None:
-    """Run the scenario catalogue; exit 1 if a scenario fails its criterion or regresses past the baseline.
+    """Run the scenario catalogue over seeds: per scenario the median [90 % CI] of each figure and its verdict over
+    the seeds (the scenario's pass criteria per run, its pass rate and its bounds on medians and percentiles).
 
-    Sensor profiles: each scenario runs on the flight and the ideal profile (--fast: only the baseline's profile,
-    the CI gate); the baseline gates the run on the profile it was recorded on.
-
-    With --vo/--stereo/--planner the catalogue runs a second time with those parts swapped in, and both tables
-    print (the plugin stack is judged by each scenario's criteria; the baseline gates the built-in stack).
-    --baseline FILE compares every stack with your own file instead (a metric may get --tolerance worse, relative;
-    FILE: a bench suite --json, or what --update-baseline writes there)."""
+    --fast is the CI gate: the fast scenarios on the gate seeds, compared seed by seed with the baseline (paired
+    exact signed-rank tests, Holm family-wise 1 %, effect-size floors; the minimum detectable change is printed).
+    With --vo/--stereo/--planner the same seeds run with those parts swapped in, side by side with the built-in
+    stack (a scorecard; --png draws its box plots). Exit status: 0 all scenarios hold, 1 a scenario failed or
+    regressed, 2 bad input, 130/143 interrupted."""
     from rover_sim.resources import source_checkout
 
     if update_baseline and baseline is None and source_checkout() is None:
@@ -254,20 +320,25 @@ def bench_suite_cmd(
     for p in profile or []:
         if p not in ("flight", "ideal"):
             bad_input(ValueError(f"--profile {p!r}: choose flight or ideal"))
-    path = str(json) if json else None
     with guarded():
-        from rover_sim.bench.junit_cases import suite_cases
-        from rover_sim.bench.missions import bench_suite
+        from rover_sim.bench.seeded import parse_perturb
+        from rover_sim.bench.seeds import parse_seeds
+        from rover_sim.bench.suite import GATE_SEEDS, PUBLISHED_SEEDS, bench_suite, interrupt_of, junit_cases
         from rover_sim.scenario.loading import plugin_overrides
 
-        profiles = tuple(profile) if profile else None
-        kw = {"fast": fast, "baseline_path": baseline, "tolerance": tolerance, "profiles": profiles}
-        rows, _ = bench_suite(path, update_baseline=update_baseline, **kw)
-        cases = suite_cases(rows)
-        overrides = plugin_overrides(vo, stereo, planner)
-        if overrides and not any(c.error for c in cases):
-            label = ", ".join(x for x in (vo, stereo, planner) if x)
-            plugin_path = str(Path(path).with_suffix(".plugins.json")) if path else None
-            plugin_rows, _ = bench_suite(plugin_path, overrides=overrides, label=label, **kw)
-            cases += suite_cases(plugin_rows, label)
+        chosen = parse_seeds(seeds, "gate" if fast else "published", GATE_SEEDS if fast else PUBLISHED_SEEDS)
+        sets = plugin_overrides(vo, stereo, planner)
+        plugins = {", ".join(x for x in (vo, stereo, planner) if x): sets} if sets else None
+        result = bench_suite(str(json) if json else None, chosen, fast=fast, profiles=tuple(profile or ()) or None,
+                             plugins=plugins, replay={v: v for v in replay_vo or []} or None,
+                             baseline_path=baseline, update_baseline=update_baseline,
+                             perturb=parse_perturb(perturb), workers=workers, scheduler=scheduler,
+                             png_path=png)  # fmt: skip
+        cases = junit_cases(result.stacks)
+        stop = interrupt_of(result.stacks)
+        if stop is not None:
+            from rover_sim.io.junit import write_junit
+
+            write_junit(junit, "bench suite", cases)
+            raise stop
     finish(junit, "bench suite", cases)

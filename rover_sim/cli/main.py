@@ -11,6 +11,7 @@ import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported anywhe
 from rover_sim.cli.bench import bench_app
 from rover_sim.cli.export import export_cmd
 from rover_sim.cli.options import JunitOpt, PlannerOpt, SetOpt, StereoOpt, VoOpt, bad_input
+from rover_sim.cli.orbital import bench_globalloc_cmd, orbital_cmd
 from rover_sim.cli.status import finish, guarded
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
@@ -231,6 +232,8 @@ def stereo_command(
 
 
 app.command("export")(export_cmd)
+app.command("orbital")(orbital_cmd)
+bench_app.command("globalloc")(bench_globalloc_cmd)
 
 
 def main() -> None:  # pragma: no cover - console entry point

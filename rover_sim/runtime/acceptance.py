@@ -7,6 +7,7 @@ The CLI and the benchmark modules read them from here and nowhere else.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -14,7 +15,7 @@ from rover_sim.runtime.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_PO
 from rover_sim.runtime.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
 from rover_sim.runtime.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
 from rover_sim.scenario.commands import KeepOut
-from rover_sim.scenario.criteria import PassSpec
+from rover_sim.scenario.criteria import DistributionSpec, PassSpec
 
 TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
 FALSE_POSITIVE_M = EVAL_FALSE_POSITIVE_M  # false positive: error > max(this, FALSE_POSITIVE_FRACTION x step)
@@ -73,12 +74,31 @@ class SweepBar:
     max_parallel_ratio: float = 0.65
 
 
+@dataclass(frozen=True)
+class GlobalLocBar:
+    """``bench globalloc``: on rocky plains and crater rims >= 95 % of stops fixed within ``false_fix_m``, median
+    error <= 0.25 m, 90th percentile <= 0.5 m, <= 30 s of CPU per fix (Perseverance's Mars Global Localization:
+    ~25 cm in ~2 min); on every terrain no false fix (accepted and more than 1 m off); >= 40 stops over >= 8 seeds
+    per terrain."""
+
+    fixed_terrains: tuple[str, ...] = ("rocky_plains", "crater_rim")
+    min_fixed_frac: float = 0.95
+    max_median_error_m: float = 0.25
+    max_p90_error_m: float = 0.5
+    max_false_fixes: int = 0
+    false_fix_m: float = 1.0
+    max_compute_s: float = 30.0
+    min_stops: int = 40
+    min_seeds: int = 8
+
+
 AUTONAV = AutonavBar()
 STEREO = StereoBar()
 RENDER = RenderBar()
 DIMES = DimesBar()
 ROCKS = RocksBar()
 SWEEP = SweepBar()
+GLOBALLOC = GlobalLocBar()
 
 
 def describe(p: PassSpec) -> str:
@@ -194,3 +214,122 @@ def _judge_wheels(wheels: dict | None, p: PassSpec, need: Callable[[bool, str], 
         need(z <= p.max_final_sinkage_m, f"final sinkage {z} m > {p.max_final_sinkage_m} m")
     if p.min_final_slip_pct is not None:
         need(slip is not None and slip >= p.min_final_slip_pct, f"final slip {slip} % < {p.min_final_slip_pct} %")
+
+
+# ================================================================================ figures over seeds
+# A scenario's claim is a distribution over seeds (`bench suite --seeds`): its verdict and the regression gate's.
+
+DEFAULT_MIN_PASS_RATE = 0.75  # without [pass.distribution] min_pass_rate: this fraction of seeds must pass
+
+
+@dataclass(frozen=True)
+class DistributionVerdict:
+    """A scenario over seeds: the fraction of seeds meeting the per-run criteria, and the verdict with its reasons
+    (every unmet distribution bound, and the failing seeds with theirs)."""
+
+    passed: bool
+    reason: str
+    pass_rate: float
+
+
+def judge_distribution(
+    run_verdicts: dict[int, tuple[bool, str]],
+    values: dict[str, list[float]],
+    spec: DistributionSpec,
+    percentile: Callable[[list[float], float], float],
+) -> DistributionVerdict:
+    """``run_verdicts``: seed -> (passed, reason) of each run; ``values``: metric -> its measured values over the
+    seeds (None dropped); ``spec``: the scenario's ``[pass.distribution]``."""
+    n = len(run_verdicts)
+    passed_runs = sum(ok for ok, _ in run_verdicts.values())
+    rate = passed_runs / n if n else 0.0
+    need_rate = DEFAULT_MIN_PASS_RATE if spec.min_pass_rate is None else spec.min_pass_rate
+    fails: list[str] = []
+    if rate < need_rate:
+        fails.append(f"{passed_runs}/{n} seeds pass (< {100 * need_rate:g} %)")
+    bounds = [(spec.max_median, 50.0, "median", 1), (spec.min_median, 50.0, "median", -1),
+              (spec.max_p90, 90.0, "p90", 1)]  # fmt: skip
+    for table, q, label, sign in bounds:
+        for metric, bound in table.items():
+            vals = values.get(metric, [])
+            if len(vals) < n:
+                fails.append(f"{label} {metric} not measured on {n - len(vals)} of {n} seeds")
+                continue
+            v = percentile(vals, q)
+            if sign * (v - bound) > 0:
+                fails.append(f"{label} {metric} {v:.3g} {'>' if sign > 0 else '<'} {bound:g}")
+    failing = [f"seed {s}: {why}" for s, (ok, why) in sorted(run_verdicts.items()) if not ok]
+    if fails:
+        reason = "; ".join(fails + failing)
+    else:
+        reason = "all criteria met" + (f" ({len(failing)} seed(s) fail: " + "; ".join(failing) + ")" if failing else "")
+    return DistributionVerdict(not fails, reason, round(rate, 4))
+
+
+@dataclass(frozen=True)
+class GateMetric:
+    """How the regression gate tests one metric: which way is worse, the scale of the paired differences
+    (``log``: log((x + offset) / (baseline + offset)), a relative change; ``identity``: plain differences), and the
+    effect-size floor a significant change must also exceed (relative for ``log``, in the metric's units otherwise).
+    ``two_sided``: a change either way is a regression (physics figures: a change means the world changed)."""
+
+    key: str
+    scale: str  # "log" | "identity"
+    floor: float
+    worse: str = "higher"  # "higher" | "lower"
+    offset: float = 0.0
+    two_sided: bool = False
+
+
+@dataclass(frozen=True)
+class GateBar:
+    """The statistical regression gate (`bench suite --fast`): the current per-seed figures against the baseline's
+    on the same seeds, each gated metric by the exact one-sided Wilcoxon signed-rank test, family-wise error held
+    at ``alpha`` by Holm's procedure over every scenario x metric test of the run, plus the effect-size floor of
+    each metric; the minimum detectable change is reported at ``power`` with the strictest Holm threshold."""
+
+    alpha: float = 0.01
+    power: float = 0.8
+    min_pairs: int = 8
+    metrics: tuple[GateMetric, ...] = (
+        GateMetric("vo_error_pct", "log", floor=0.10, offset=0.05),
+        GateMetric("vo_convergence_pct", "identity", floor=5.0, worse="lower"),
+        GateMetric("dr_error_pct", "log", floor=0.10, offset=0.05, two_sided=True),
+        GateMetric("goal_distance_m", "log", floor=0.25, offset=0.1),
+    )
+
+
+GATE = GateBar()
+
+
+def regressed(p_value: float, threshold: float, effect: float, metric: GateMetric) -> bool:
+    """A gated metric regressed: significant at its Holm threshold AND its median paired change (in the metric's
+    scale, oriented so that positive is worse; absolute for two-sided metrics) reaches the effect-size floor."""
+    size = abs(effect) if metric.two_sided else effect
+    floor = math.log1p(metric.floor) if metric.scale == "log" else metric.floor
+    return p_value <= threshold and size >= floor
+
+
+def judge_globalloc(terrains: dict[str, dict], bar: GlobalLocBar = GLOBALLOC) -> tuple[bool, list[str]]:
+    """``bench globalloc``'s verdict on one localiser's per-terrain summaries (``stops``, ``fixed``, ``success``,
+    ``false_fixes``, ``median_error_m``, ``p90_error_m``, ``compute_s_median``, ``seeds``)."""
+    reasons = []
+    for name, b in terrains.items():
+        if b["stops"] < bar.min_stops or len(b.get("seeds", [])) < bar.min_seeds:
+            reasons.append(f"{name}: {b['stops']} stops over {len(b.get('seeds', []))} seeds "
+                           f"(need >= {bar.min_stops} over >= {bar.min_seeds})")  # fmt: skip
+        if b["false_fixes"] > bar.max_false_fixes:
+            reasons.append(f"{name}: {b['false_fixes']} false fixes (> {bar.false_fix_m} m off; allowed 0)")
+        if b["compute_s_median"] is not None and b["compute_s_median"] > bar.max_compute_s:
+            reasons.append(f"{name}: median compute {b['compute_s_median']:.1f} s > {bar.max_compute_s} s")
+        if name not in bar.fixed_terrains:
+            continue
+        frac = b["success"] / max(b["stops"], 1)
+        if frac < bar.min_fixed_frac:
+            reasons.append(f"{name}: {100 * frac:.0f} % of stops fixed within {bar.false_fix_m} m "
+                           f"(< {100 * bar.min_fixed_frac:.0f} %)")  # fmt: skip
+        for key, lim in (("median_error_m", bar.max_median_error_m), ("p90_error_m", bar.max_p90_error_m)):
+            v = b[key]
+            if v is None or v > lim:
+                reasons.append(f"{name}: {key} {'not measured' if v is None else f'{v:.3f}'} (> {lim})")
+    return not reasons, reasons

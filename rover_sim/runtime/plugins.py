@@ -25,12 +25,14 @@ import numpy as np
 
 from nav.gestalt import GestaltPlanner
 from nav.protocols import (
+    GlobalLocalizer,
     Planner,
     PluginContractError,
     StereoMatcher,
     VisualOdometer,
     check_decision,
     check_disparity,
+    check_globalloc_result,
     check_vo_result,
 )
 from nav.stereo import SadStereo
@@ -39,7 +41,8 @@ from rover_sim.errors import PluginError
 from rover_sim.scenario.nav_spec import BUILTIN, PlannerSpec, StereoSpec, VoSpec
 
 ENTRY_POINT_GROUP = "rover_sim.plugins"
-PROTOCOLS: dict[str, type] = {"vo": VisualOdometer, "stereo": StereoMatcher, "planner": Planner}
+PROTOCOLS: dict[str, type] = {"vo": VisualOdometer, "stereo": StereoMatcher, "planner": Planner,
+                              "globalloc": GlobalLocalizer}
 
 
 def resolve(spec: str) -> Any:
@@ -90,7 +93,8 @@ def instantiate(kind: str, spec: str, params: object | None = None) -> Any:
         raise PluginError(spec, "constructor", f"{type(err).__name__}: {err}") from None
     protocol = PROTOCOLS[kind]
     if not isinstance(obj, protocol):
-        missing = [m for m in ("reset", "step", "disparity", "arcs") if hasattr(protocol, m) and not hasattr(obj, m)]
+        methods = ("reset", "step", "disparity", "arcs", "localize")
+        missing = [m for m in methods if hasattr(protocol, m) and not hasattr(obj, m)]
         raise PluginError(
             spec,
             "protocol",
@@ -186,3 +190,30 @@ def make_planner(spec: PlannerSpec) -> Planner:
     if spec.impl == BUILTIN:
         return GestaltPlanner(spec.params)
     return GuardedPlanner(instantiate("planner", spec.impl, spec.params), spec.impl)
+
+
+class GuardedGlobalLocalizer:
+    """A :class:`nav.protocols.GlobalLocalizer` whose every answer is checked."""
+
+    def __init__(self, impl: GlobalLocalizer, name: str) -> None:
+        self.impl, self.name = impl, name
+
+    def localize(self, views, R_world_rover, prior_xy_yaw, prior_covariance, orbital):  # noqa: ANN001, ANN201
+        try:
+            res = self.impl.localize(views, R_world_rover, prior_xy_yaw, prior_covariance, orbital)
+        except Exception as err:  # noqa: BLE001 - user code
+            raise PluginError(self.name, "localize()", f"raised {type(err).__name__}: {err}") from None
+        try:
+            check_globalloc_result(res)
+        except PluginContractError as err:
+            raise PluginError(self.name, f"localize() result field '{err.field}'", err.problem) from None
+        return res
+
+
+def make_global_localizer(spec: str) -> GlobalLocalizer:
+    """The built-in orbital localiser (``"builtin"``) or a plugin, guarded."""
+    if spec == BUILTIN:
+        from nav.globalloc import OrbitalLocalizer
+
+        return OrbitalLocalizer()
+    return GuardedGlobalLocalizer(instantiate("globalloc", spec), spec)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -134,15 +135,18 @@ def run_scenario(
     record: bool = True,
     progress: bool = False,
     reraise_interrupt: bool = False,
+    attach: Callable[[Mission], None] | None = None,
 ) -> Metrics:
     """Load, run and write one scenario. Ctrl-C, SIGTERM (see :mod:`rover_sim.interrupts`) or a physics divergence
     still leaves a valid recording and partial metrics (``passed`` false, ``reason`` says why); so does an
     interrupt while the world is being built ("interrupted during setup"). With ``reraise_interrupt`` the
-    interrupt is raised again once the outputs are written (a benchmark stops instead of going on)."""
+    interrupt is raised again once the outputs are written (a benchmark stops instead of going on). ``attach`` is
+    called with the built mission before it runs (listeners on its public hooks: exporters, replayed estimators)."""
     import time
 
     with interrupts.sigterm_raises():
-        return _run(scenario, out_dir, seed, overrides, record, progress, reraise_interrupt, time.perf_counter())
+        return _run(scenario, out_dir, seed, overrides, record, progress, reraise_interrupt, time.perf_counter(),
+                    attach)
 
 
 def _run(
@@ -154,6 +158,7 @@ def _run(
     progress: bool,
     reraise_interrupt: bool,
     t0: float,
+    attach: Callable[[Mission], None] | None = None,
 ) -> Metrics:
     import time
 
@@ -194,6 +199,12 @@ def _run(
             if pending.exc is not None:
                 raise pending.exc
             mission = Mission(sc, rec, on_progress)
+            if attach is not None:
+                try:
+                    attach(mission)
+                except BaseException:  # a listener that cannot start: release the renderer's GL context
+                    mission.close()
+                    raise
         except KeyboardInterrupt as e:  # Ctrl-C or SIGTERM while the world was being built
             metrics = setup_interrupted(sc, e, time.perf_counter() - t0)
             rec.log_event(0.0, 0, metrics.reason, "ERROR")

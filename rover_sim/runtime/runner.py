@@ -36,6 +36,7 @@ from rover_sim.runtime.pointing import seek_texture
 from rover_sim.runtime.runner_recording import RunRecording
 from rover_sim.runtime.sol import BudgetSpent, SolBudget
 from rover_sim.scenario.commands import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, SleepCmd, TurnCmd
+from rover_sim.scenario.nav_spec import VoSpec
 from rover_sim.scenario.schema import Scenario
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
 from rover_sim.sim.physics import WHEEL_RADIUS_M, RoverSim
@@ -64,6 +65,23 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
 
+def onboard_for(scenario: Scenario, start_pose: Pose, vo: VoSpec, on_event: Callable[[str], None] | None) -> Onboard:
+    """The onboard stack a scenario configures, with the visual odometer ``vo`` (the scenario's own, or another one
+    riding along on the same observations)."""
+    nav = scenario.nav
+    return Onboard(
+        start_pose,
+        vo=make_vo(vo),
+        stereo=make_stereo(nav.stereo),
+        planner_factory=lambda: make_planner(nav.planner),
+        shape=rover_shape() if vo.shadow_mask else None,
+        vo_update=vo.update,
+        epipolar_check=nav.epipolar_check,
+        on_event=on_event,
+        stereo_rotation_sigma_rad=math.radians(scenario.sensors.lens.stereo_rotation_deg),
+    )
+
+
 class Mission(RunRecording):
     """One scenario run. ``run()`` returns :class:`Metrics`; :func:`rover_sim.runtime.run.write_outputs` writes them.
     What it logs to the recorder beyond events and poses is in :class:`RunRecording`."""
@@ -81,17 +99,7 @@ class Mission(RunRecording):
         self.world = World(scenario)
         nav = scenario.nav
         try:
-            self.onboard = Onboard(
-                self.world.start_pose(),
-                vo=make_vo(nav.vo),
-                stereo=make_stereo(nav.stereo),
-                planner_factory=lambda: make_planner(nav.planner),
-                shape=rover_shape() if nav.vo.shadow_mask else None,
-                vo_update=nav.vo.update,
-                epipolar_check=nav.epipolar_check,
-                on_event=self.event,
-                stereo_rotation_sigma_rad=math.radians(scenario.sensors.lens.stereo_rotation_deg),
-            )
+            self.onboard = onboard_for(scenario, self.world.start_pose(), nav.vo, self.event)
         except BaseException:  # a plugin that does not load, or Ctrl-C: release the renderer's GL context
             self.world.close()
             raise
@@ -108,6 +116,7 @@ class Mission(RunRecording):
         self.vo_listeners: list[Callable[[VoStep, np.ndarray], None]] = []  # (step, T_rover_cam of the pair)
         self.tick_listeners: list[Callable[[Observation, Pose], None]] = []  # (sensor data, truth) at 8 Hz
         self.image_listeners: list[Callable[[Observation, Pose], None]] = []  # every stereo pair the rover takes
+        self.vo_reset_listeners: list[Callable[[], None]] = []  # VO starts a new sequence (repointing, a new sol)
         self.extra_timing: dict = {}
         self._wall_s = 0.0
         # a sol's drive (issue #18): budgets, mission clock, decimated poses and tracks, streamed terrain tiles
@@ -193,7 +202,7 @@ class Mission(RunRecording):
             self.point_mast(cmd.pan_deg, cmd.tilt_deg)
             self.world.calibrate(self.sc.nav.camera)
             if self.onboard.vo is not None:
-                self.onboard.reset_vo()
+                self.reset_vo()
                 self.vo_update()
         elif isinstance(cmd, GotoCmd):
             self.goto(cmd)
@@ -245,7 +254,7 @@ class Mission(RunRecording):
             if on_slope:
                 self.vo_update()
             else:  # flat ground: no VO pair (MER); the next VO step on a slope starts afresh
-                self.onboard.reset_vo()
+                self.reset_vo()
 
     def sleep(self, cmd: SleepCmd) -> None:
         """End of sol: park with the wheels held and sleep to the next sol's wake-up time (issue #18).
@@ -266,7 +275,7 @@ class Mission(RunRecording):
         if self.sc.sun.local_solar_time_h is not None:
             self.world.move_sun()
         if self.onboard.vo is not None:
-            self.onboard.reset_vo()
+            self.reset_vo()
         lst = self.world.clock.local_solar_time_h  # type: ignore[union-attr]
         self.event(f"sol {ended} over: slept {slept_s:.0f} s; sol {ended + 1} wakes at {lst:.2f} h local solar time")
 
@@ -398,6 +407,12 @@ class Mission(RunRecording):
             if out.vo_slip > limit:
                 raise Halt("slip_limit", f"VO measured {100 * out.vo_slip:.0f} % slip (limit {100 * limit:.0f} %)")
         return out
+
+    def reset_vo(self) -> None:
+        """VO forgets its previous pair (the mast moved, or a new sol starts), and so does every listener's."""
+        self.onboard.reset_vo()
+        for listener in self.vo_reset_listeners:
+            listener()
 
     def notify_images(self, obs: Observation) -> None:
         """Hand a freshly imaged observation (and the truth at that instant) to the image listeners."""

@@ -4,9 +4,31 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from rover_sim.scenario.base import Spec
+
+# metrics a distribution criterion may bound (read from metrics.json: rover_sim.bench.seeded.METRICS)
+DISTRIBUTION_METRICS = ("vo_error_pct", "dr_error_pct", "vo_convergence_pct", "max_slip_pct", "goal_distance_m",
+                        "false_positives", "distance_m")  # fmt: skip
+
+
+class DistributionSpec(Spec):
+    """``[pass.distribution]``: criteria over seeds (``bench suite --seeds``): at least ``min_pass_rate`` of the
+    seeds meet the per-run criteria (default: ``acceptance.DEFAULT_MIN_PASS_RATE``) and every bound holds."""
+
+    min_pass_rate: float | None = Field(None, ge=0.0, le=1.0, description="Fraction of seeds that must pass.")
+    max_median: dict[str, float] = Field(default_factory=dict, description="metric -> upper bound of its median")
+    min_median: dict[str, float] = Field(default_factory=dict, description="metric -> lower bound of its median")
+    max_p90: dict[str, float] = Field(default_factory=dict, description="metric -> upper bound of its 90th pct")
+
+    @model_validator(mode="after")
+    def _known_metrics(self) -> DistributionSpec:
+        for table in ("max_median", "min_median", "max_p90"):
+            for key in getattr(self, table):
+                if key not in DISTRIBUTION_METRICS:
+                    raise ValueError(f"{table}: unknown metric {key!r} (allowed: {', '.join(DISTRIBUTION_METRICS)})")
+        return self
 
 
 class PassSpec(Spec):
@@ -41,6 +63,8 @@ class PassSpec(Spec):
     min_final_slip_pct: float | None = Field(
         None, ge=0.0, le=500.0, description="Slip over the last metre of commanded wheel travel (truth)."
     )
+
+    distribution: DistributionSpec = Field(default_factory=DistributionSpec)
 
     def judges_wheels(self) -> bool:
         """True when a criterion needs the end-of-run wheel metrics (``metrics.extra["wheels"]``)."""

@@ -14,6 +14,7 @@ from typing import Any
 
 from pydantic import ConfigDict, Field, model_validator
 
+from rover_sim.orbital.spec import OrbitalSpec
 from rover_sim.scenario.base import Spec
 from rover_sim.scenario.commands import Command, KeepOut, SleepCmd, SolSpec
 from rover_sim.scenario.criteria import PassSpec
@@ -48,6 +49,7 @@ class Scenario(Spec):
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
     fast: bool = Field(False, description="Part of the fast CI suite.")
     sol: SolSpec | None = Field(None, description="Drive-time and distance budgets of a sol's drive (issue #18).")
+    orbital: OrbitalSpec = Field(default_factory=OrbitalSpec, description="Orbital products' error model.")
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)
 

@@ -100,6 +100,9 @@ class PhysicsSpec(Spec):
     deformable: bool = Field(
         False, description="Ruts, berms and multipass in the heightfield (opt-in); needs 'wong_reece'."
     )
+    perturb_size: float = Field(0.0, ge=0.0, le=0.01, description="A seeded 'butterfly' added to the settled "
+                                "rover: metres and radians, seeded directions (another CPU or build).")  # fmt: skip
+    perturb_seed: int = Field(0, ge=0, le=2**31 - 1, description="Seed of the perturbation's directions.")
 
     @model_validator(mode="after")
     def _deformable_needs_wong_reece(self) -> PhysicsSpec:

@@ -55,6 +55,15 @@ class WindowPainter:
         return texture_rgb_u8(albedo)
 
 
+def perturbation(size: float, perturb_seed: int, scenario_seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A displacement of ``size`` metres and a rotation vector of ``size`` radians, in directions drawn from
+    (``perturb_seed``, ``scenario_seed``): each seed of a scenario gets its own butterfly."""
+    rng = np.random.default_rng([perturb_seed, scenario_seed])
+    directions = rng.normal(size=(2, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    return size * directions[0], size * directions[1]
+
+
 def texture_px_per_m(terrain: Terrain, wanted_px_per_m: float) -> float:
     side = 2.0 * max(terrain.half_x_m, terrain.half_y_m)
     return float(min(wanted_px_per_m, MAX_TEXTURE_SIDE_PX / side))
@@ -128,6 +137,8 @@ class World:
         self.mast_pan_deg, self.mast_elevation_deg = 0.0, 0.0
         self.point_mast(scenario.nav.mast_pan_deg, scenario.nav.mast_tilt_deg)
         self.sim.step_for(SETTLE_S)
+        if scenario.physics.perturb_size > 0.0:
+            self.sim.nudge(*perturbation(scenario.physics.perturb_size, scenario.physics.perturb_seed, scenario.seed))
         # [sensors.odometry]: this run's draw of the odometry and attitude errors (none in the ideal profile)
         odo = scenario.sensors.odometry
         self.odometry_errors = OdometryErrors.draw(scenario.seed, **odo.drawn_sizes())

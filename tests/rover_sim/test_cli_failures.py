@@ -266,18 +266,3 @@ def test_junit_writer(tmp_path):
     assert cases["b"].find("failure").get("message") == "VO error 4 % > 3 %"
     assert cases["c"].find("error") is not None
 
-
-def test_user_baseline_relative_tolerance(tmp_path):
-    from rover_sim.bench.missions import load_baseline, relative_regressions
-    from rover_sim.runtime.evaluator import Metrics
-
-    def metrics(vo: float, conv: float) -> Metrics:
-        return Metrics("s", 0, 10.0, 3.0, vo, conv, 5.0, 4.0, True, "all criteria met", 1.0)
-
-    rows = tmp_path / "suite.json"
-    rows.write_text(json.dumps([{"scenario": "s", "vo_error_pct": 1.0, "vo_convergence_pct": 90.0,
-                                 "dr_error_pct": 3.0, "false_positives": 0}]))  # fmt: skip
-    base = load_baseline(rows)["s"]
-    assert relative_regressions(metrics(1.1, 85.0), base, 0.10) == []
-    out = relative_regressions(metrics(1.3, 70.0), base, 0.10)
-    assert len(out) == 2 and "VO error 1.3 % > baseline 1.0 %" in out[0] and "VO convergence" in out[1]

@@ -183,36 +183,42 @@ def test_flight_dead_reckoning_is_worse_than_ideal_but_within_the_mer_goal(tmp_p
 
 
 def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_path, monkeypatch, capsys):
-    """Profile plumbing of `bench suite` with the missions stubbed out: each profile's rows are tagged, the table
-    says which profile, the baseline gate judges only the baseline profile's run, --update-baseline stores it."""
+    """Profile plumbing of `bench suite` with the runs stubbed out: each profile's rows are judged and printed, the
+    regression gate judges only the baseline profile's run, --update-baseline stores it with its perturbed spread."""
     import json
 
-    from rover_sim.bench import missions
-    from rover_sim.runtime.evaluator import Metrics
+    from rover_sim.apps.sweep_jobs import JobResult
+    from rover_sim.bench import seeded, suite
+    from rover_sim.bench.seeds import Seeds
 
     seen = []
-    gated = missions.BASELINE_PROFILE
-    other = "ideal" if gated == "flight" else "flight"
 
-    def fake_run(name, out_dir, record, overrides):
-        profile = next(o for o in overrides if o.startswith("sensors.profile=")).split("=")[1].strip('"')
-        seen.append(profile)
-        dr = 1.0 if profile == gated else 5.0  # far from the stored baseline on the ungated profile only
-        return Metrics(name, 0, 3.0, dr, 0.2, 100.0, 4.0, 2.0, True, "all criteria met", 1.0,
-                       kitti_segment_error_pct={"vo": {"1m": 1.0}, "dead_reckoning": {"1m": dr}},
-                       rms_position_error_m={"vo": 0.01, "dead_reckoning": 0.05})  # fmt: skip
+    def fake_run_jobs(jobs, jobs_dir, *, on_result, **kw):
+        for i, job in enumerate(jobs):
+            profile = job.scenario["sensors"]["profile"]
+            seen.append((profile, job.scenario["physics"]["perturb_size"]))
+            vo = 0.2 + 0.01 * (job.seed - 200)
+            m = {"scenario": job.scenario["name"], "seed": job.seed, "distance_m": 3.0, "dr_error_pct": 5.0,
+                 "vo_error_pct": vo, "vo_convergence_pct": 100.0, "max_slip_pct": 4.0, "passed": True,
+                 "reason": "all criteria met", "false_positives": 0, "goal_distance_m": None}  # fmt: skip
+            on_result(i + 1, len(jobs), job, JobResult(job.job_id, "ok", metrics=m))
+        return []
 
-    monkeypatch.setattr(missions, "run_scenario", fake_run)
-    monkeypatch.setattr(missions, "catalogue", lambda: ["wopmay"])
+    monkeypatch.setattr(seeded, "run_jobs", fake_run_jobs)
+    monkeypatch.setattr(suite, "scenario_names", lambda fast: ["wopmay"])
+    seeds = Seeds(tuple(range(200, 212)), "gate")
     base = tmp_path / "base.json"
-    base.write_text(json.dumps({"wopmay": {"dr_error_pct": 1.0, "vo_error_pct": 0.2, "vo_convergence_pct": 100.0}}))
-    rows, ok = missions.bench_suite(None, out_root=tmp_path, baseline_path=base, update_baseline=True)
-    assert seen == ["flight", "ideal"] and ok
-    assert [r["profile"] for r in rows] == ["flight", "ideal"] and not any(r["regressions"] for r in rows)
+    r = suite.bench_suite(None, seeds, out_root=tmp_path, baseline_path=base, update_baseline=True, workers=0)
+    assert r.passed and [p for p, _ in seen].count("ideal") == 12
+    assert sorted({e for _, e in seen}) == [0.0, suite.SPREAD_PERTURBATION[0]]  # the spread run is perturbed
     out = capsys.readouterr().out
-    assert f"sensors profile: {other}" in out and f"sensors profile: {gated} (gated against the baseline)" in out
-    assert "| wopmay | 3.00 | 4.00 | 5.00 | 0.20 | 5.00 / - / - | 1.00 / - / - | 0.050 / 0.010 |" in out
-    assert json.loads(base.read_text())["wopmay"]["dr_error_pct"] == 1.0  # the gated profile's run was stored
+    assert "sensors profile: ideal" in out and "sensors profile: flight" in out
+    assert "| wopmay | 1.00 | 3.00 [3.00, 3.00] |" in out
+    stored = json.loads(base.read_text())
+    assert stored["profile"] == suite.BASELINE_PROFILE and stored["seeds"] == list(seeds.values)
+    assert stored["scenarios"]["wopmay"]["per_seed"]["vo_error_pct"]["205"] == pytest.approx(0.25)
     seen.clear()
-    missions.bench_suite(None, fast=True, out_root=tmp_path, baseline_path=base, profiles=None)
-    assert seen == [missions.BASELINE_PROFILE]
+    r = suite.bench_suite(None, seeds, fast=True, out_root=tmp_path, baseline_path=base, workers=0)
+    assert {p for p, _ in seen} == {suite.BASELINE_PROFILE} and r.passed
+    assert "regression gate" in capsys.readouterr().out
+    assert r.data["profiles"]["flight"]["scenarios"]["wopmay"]["regression"]["vo_error_pct"]["regressed"] is False

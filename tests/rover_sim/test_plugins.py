@@ -123,13 +123,14 @@ def test_bad_parameter_names_the_field_and_the_range():
 
 @pytest.mark.parametrize("case", ["short", pytest.param("msstb", marks=pytest.mark.slow)])
 def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsys, case):
-    """`rover-sim bench vo --vo examples.opencv_vo:OpenCvStereoVO` on one case: both rows, plugin JSON keys.
-    The fast form runs a short sandy-slope case (the tiny scenario, 1.2 m with 4 VO steps); `-m slow` runs MSSTB."""
+    """`rover-sim bench vo --vo examples.opencv_vo:OpenCvStereoVO` on one case over seeds: every variant's
+    table, the plugin's JSON beside MER VO's. The fast form runs a short sandy-slope case (the tiny scenario, 1.2 m
+    with 4 VO steps); `-m slow` runs MSSTB."""
     import json
-    import tomllib  # noqa: F401 - the scenario file below is TOML
     from pathlib import Path
 
-    from rover_sim.bench.missions import VO_CASES, bench_vo
+    from rover_sim.bench.seeds import Seeds
+    from rover_sim.bench.vo import BUILTIN, FULL_POSE, VO_CASES, bench_vo, runs_of
 
     monkeypatch.chdir(Path(__file__).resolve().parents[2])  # the example lives in the repository's examples/
     scenarios = dict(VO_CASES)
@@ -138,23 +139,26 @@ def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsy
         scenarios = {"short": scenario_from_dict(short)}
     out = tmp_path / "vo.json"
     plugin = "examples.opencv_vo:OpenCvStereoVO"
-    results = bench_vo(str(out), out_root=tmp_path, plugins=[plugin], cases=[case], case_scenarios=scenarios)
+    seeds = (0,) if case == "short" else (0, 1)
+    stacks, _ = bench_vo(str(out), Seeds(seeds, "tuning"), out_root=tmp_path, plugins=[plugin], cases=[case],
+                         case_scenarios=scenarios, workers=0)  # fmt: skip
     table = capsys.readouterr().out
-    assert f"| MER VO (builtin) | flight | position | {case} |" in table
-    assert f"| {plugin} | flight | position | {case} |" in table
-    assert f"| MER VO (builtin) | ideal | position | {case} |" in table
-    assert f"| MER VO (builtin), full-pose update | flight | full_pose | {case} |" in table
+    for label, profile in ((BUILTIN, "flight"), (BUILTIN, "ideal"), (FULL_POSE, "flight"), (plugin, "flight")):
+        assert f"stack: {label}, sensors profile: {profile}, seeds: {','.join(map(str, seeds))} (tuning)" in table
     saved = json.loads(out.read_text())
-    assert set(saved["plugins"][plugin][case]) == set(saved[case]) == set(saved["ideal"][case])
-    assert saved[case]["profile"] == "flight" and saved["ideal"][case]["profile"] == "ideal"
-    assert saved["full_pose"][case]["vo_update"] == "full_pose"
-    assert set(saved[case]["kitti_segment_error_pct"]) == {"vo", "dead_reckoning"}
-    assert saved[case]["rms_position_error_m"]["vo"] < saved[case]["rms_position_error_m"]["dead_reckoning"]
-    mer, ours = results[case], results["plugins"][plugin][case]
-    assert mer["passed"] and mer["vo_convergence_pct"] == 100.0
+    mer = saved["profiles"]["flight"]["scenarios"][case]
+    ours = saved["plugins"][plugin]["profiles"]["flight"]["scenarios"][case]
+    assert set(saved["profiles"]) == {"flight", "ideal"} and saved["seeds"] == list(seeds)
+    assert mer["passed"] and mer["metrics"]["vo_convergence_pct"]["median"] == 100.0
+    assert set(mer["metrics"]["vo_error_pct"]["per_seed"]) == {str(s) for s in seeds}
     # the example VO really ran in the loop (its steps were judged), and did better than dead reckoning
-    assert ours["vo_convergence_pct"] is not None and ours["vo_convergence_pct"] > 50.0
-    assert ours["vo_error_pct"] < ours["dr_error_pct"]
+    runs = runs_of(stacks, plugin)[case]
+    for seed in seeds:
+        m = runs.metrics[seed]
+        assert m["vo_convergence_pct"] is not None and m["vo_convergence_pct"] > 50.0
+        assert m["vo_error_pct"] < m["dr_error_pct"]
+    assert ours["metrics"]["vo_error_pct"]["median"] is not None
+    assert saved["scorecard"][plugin]["summary"] is not None
 
 
 def test_installed_packages_register_plugins_by_entry_point(user_module, monkeypatch):
