@@ -5,7 +5,7 @@ Registered as ``rover_sim/MER-v0`` (goal = the scenario's destination, not obser
 ``rover_sim`` imports gymnasium but not mujoco; the world is built on ``reset``.
 
 Built on the world layer (terrains, RoverSim, SensorSuite, StereoRenderer, drive primitives), the way
-``rover_sim.mission.pipeline.Mission`` builds a world, and on the mission's camera chain for the sensor profile
+``rover_sim.runtime.runner.Mission`` builds a world, and on the mission's camera chain for the sensor profile
 (``[sensors] profile``, see :class:`RoverEnv`). The honesty rule holds: observations carry only what the
 rover senses (images, IMU, encoders, commanded mast pointing, an operator-given goal); ground truth goes to
 ``info``. GL: each world owns one EGL context; vector environments must use ``context="spawn"``.
@@ -22,21 +22,21 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
+from rover_sim.env_world import EnvWorld
 from rover_sim.errors import PhysicsDiverged
 
 if TYPE_CHECKING:
     from nav.rectify import Rectification
-    from rover_sim.mission.calibration import RunCalibration
-    from rover_sim.mission.scenario import Scenario
     from rover_sim.render.renderer import StereoRenderer
+    from rover_sim.scenario.schema import Scenario
     from rover_sim.sim.physics import RoverSim
     from rover_sim.sim.sensors import SensorSuite
+    from rover_sim.world.calibration import RunCalibration
 
 GYRO_RANGE_RAD_S = math.radians(1000.0)  # LN-200 class input range: readings saturate here
 ACCEL_RANGE_M_S2 = 40.0 * 9.80665
 WHEEL_ANGLE_RANGE_RAD = 1.0e5  # cumulative wheel angle bound of the observation (12.5 km of rolling)
 MIN_CURVATURE_PER_M = 0.02  # below this |curvature| (radius > 50 m) an arc is driven as a straight line
-MAX_TEXTURE_SIDE_PX = 8192  # as in Mission: ground texture memory stays under ~200 MB
 SEED_MAX = 2**31 - 1
 
 
@@ -56,7 +56,7 @@ class RewardConfig:
 def planned_destination(sc: Scenario) -> tuple[float, float] | None:
     """Where the scenario's commands lead on paper (no slip): the last goto/autonav target, else the end point
     of the drive/arc/turn sequence integrated from the start pose; None if the commands do not move the rover."""
-    from rover_sim.mission.scenario import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, TurnCmd
+    from rover_sim.scenario.commands import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, TurnCmd
 
     x, y, yaw = sc.start.x_m, sc.start.y_m, math.radians(sc.start.yaw_deg)
     moved = False
@@ -76,7 +76,7 @@ def planned_destination(sc: Scenario) -> tuple[float, float] | None:
     return (x, y) if moved else None
 
 
-class RoverEnv(gymnasium.Env):
+class RoverEnv(EnvWorld, gymnasium.Env):
     """A MER rover on a scenario's terrain, commanded one drive primitive per step.
 
     **Action** ``Box(-1, 1, (3,), float32)`` = ``[mode, curvature, amount]``, all normalised:
@@ -101,13 +101,13 @@ class RoverEnv(gymnasium.Env):
 
     **Images and the sensor profile** (``[sensors] profile`` of the scenario, "flight" by default): with "ideal"
     they are the exact pinhole pairs (rectified by construction), ``image_noise`` adding the renderer's simple
-    noise. With "flight" they follow the mission's chain (:class:`rover_sim.mission.world.World`): raw pairs
+    noise. With "flight" they follow the mission's chain (:class:`rover_sim.world.world.World`): raw pairs
     through the true lenses (:mod:`rover_sim.render.lens`, a seeded mounting/calibration draw per world,
-    :class:`~rover_sim.mission.calibration.RunCalibration`) and the CCD image formation
+    :class:`~rover_sim.world.calibration.RunCalibration`) and the CCD image formation
     (:mod:`rover_sim.render.imaging`, always noisy: ``image_noise`` does not apply), the mast stopping within its
     encoder error, then rectified through the *calibrated* models at the commanded pointing
-    (:func:`~rover_sim.mission.calibration.onboard_stereo_models`, :func:`nav.rectify.rectification`, as
-    :meth:`rover_sim.mission.onboard.Onboard.rectified` does), so calibration errors reach a policy as they reached
+    (:func:`~rover_sim.world.calibration.onboard_stereo_models`, :func:`nav.rectify.rectification`, as
+    :meth:`rover_sim.runtime.onboard.Onboard.rectified` does), so calibration errors reach a policy as they reached
     MER's stereo and VO (the shapes are the same in both profiles). ``render()`` (``rgb_array``) is a colour pinhole
     view for people, not a sensor: it is the same in both profiles.
 
@@ -175,8 +175,9 @@ class RoverEnv(gymnasium.Env):
         image_noise: bool | None = None,
         shadows: bool | None = None,
     ) -> None:
-        from rover_sim.mission.scenario import Scenario, load_scenario
         from rover_sim.render.cameras import STEREO_PAIRS
+        from rover_sim.scenario.loading import load_scenario
+        from rover_sim.scenario.schema import Scenario
 
         self.scenario = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, list(overrides))
         if not cameras or any(c not in STEREO_PAIRS for c in cameras):
@@ -241,57 +242,6 @@ class RoverEnv(gymnasium.Env):
         self._last_encoders = np.zeros(10)
         self._imu: list = []
         self._step_events: dict[str, Any] = {}
-
-    # ------------------------------------------------------------------ world
-    def _build_world(self, world_seed: int) -> None:
-        from rover_sim.mission.calibration import RunCalibration, build_true_lens
-        from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
-        from rover_sim.sim.physics import RoverSim
-        from rover_sim.sim.world import Sun
-        from terrains import synthesize
-
-        self._close_world()
-        sc = self.scenario.model_copy(update={"seed": world_seed})
-        if sc.terrain.streamed is not None:
-            raise ValueError(f"scenario {sc.name!r}: the Gymnasium environment needs a whole-site terrain; "
-                             "remove [terrain.streamed] (streamed sites run with `rover-sim run`)")  # fmt: skip
-        terrain = synthesize(sc.terrain, world_seed)
-        side = 2.0 * max(terrain.half_x_m, terrain.half_y_m)
-        px_per_m = min(sc.appearance.texture_px_per_m, MAX_TEXTURE_SIDE_PX / side)
-        ap = sc.appearance
-        texture = terrain_texture(
-            terrain, px_per_m, world_seed, fine_soil=ap.fine_soil, contrast=ap.contrast, patches=ap.patch_tuples()
-        )
-        self._sim = RoverSim(
-            terrain,
-            Sun(sc.sun.azimuth_deg, sc.sun.elevation_deg, self.shadows),
-            texture_rgb=texture,
-            timestep_s=sc.physics.timestep_s,
-            soil_model=sc.physics.soil_model,
-        )
-        if sc.physics.deformable:
-            self._sim.enable_deformation()
-        noise = ImageNoise(seed=0) if self.image_noise else None  # its generator is re-seeded on every reset
-        lens = sc.sensors.lens  # [sensors.lens] / [sensors.imaging]: the camera hardware, as World draws it
-        self._calibration = RunCalibration(lens, world_seed) if lens.enabled else None
-        config = RenderConfig(resolution_px=self.resolution_px, noise=noise, shadows=self.shadows,
-                              imaging=sc.sensors.imaging, imaging_seed=world_seed)  # fmt: skip
-        true_lens = None
-        if self._calibration is not None:
-            true_lens = build_true_lens(self._sim.model, self._sim.data, self._calibration, config.native_px)
-        self._renderer = StereoRenderer(self._sim, config, lens=true_lens)
-        self._world_seed, self._world_sc = world_seed, sc
-
-    def _close_world(self) -> None:
-        if self._sensors is not None:
-            self._sensors.detach()
-            self._sensors = None
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        self._sim = None
-        self._world_seed = self._world_sc = self._calibration = None
-        self._rectifications = {}
 
     def _sample_goal(self, rng: np.random.Generator) -> np.ndarray | None:
         st = self.scenario.start
@@ -421,27 +371,6 @@ class RoverEnv(gymnasium.Env):
         k = curvature * self.max_curvature_per_m
         distance = amount * self.max_drive_m
         return Straight(distance) if abs(k) < MIN_CURVATURE_PER_M else Arc(1.0 / k, distance)
-
-    def _point_mast(self, sc: Scenario) -> None:
-        """Command the scenario's mast pointing; the mast stops within its encoder error (flight), and the onboard
-        rectification of each pair is computed from the calibrated models at the *commanded* pointing (as
-        :meth:`rover_sim.mission.world.World.calibrate` does; none in the ideal profile)."""
-        from nav.rectify import rectification
-        from rover_sim.mission.calibration import MastEncoders, onboard_stereo_models
-
-        sim, lens = self._sim, sc.sensors.lens
-        pan_deg, elevation_deg = sc.nav.mast_pan_deg, sc.nav.mast_tilt_deg
-        pan_true_deg, elevation_true_deg = MastEncoders(lens, sc.seed).true_angles_deg(pan_deg, elevation_deg)
-        sim.set_mast(math.radians(pan_true_deg), -math.radians(elevation_true_deg))  # the tilt joint turns down
-        self._rectifications = {}
-        if self._calibration is None and not lens.has_mast_error:
-            return
-        for pair in self.cameras:
-            _, calib = onboard_stereo_models(
-                sim.model, sim.data, self._calibration, pair, self.resolution_px, pan_deg, elevation_deg
-            )
-            if calib is not None:
-                self._rectifications[pair] = rectification(calib)
 
     def _drain_sensors(self) -> None:
         imu, enc = self._sensors.poll()

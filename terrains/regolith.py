@@ -15,7 +15,7 @@ sizes and cover fractions below are approximate, set by eye on rendered navcam v
 * micro-relief: pebbles and clasts are low domes, the fine soil has ~1 mm relief. With a sun direction the relief
   is baked into the albedo as Lambert shading relative to flat ground (``n.l / l_z``), so the texture's
   appearance depends on the lighting (the renderer re-bakes it when the sun has moved by more than a few degrees;
-  rover_sim.mission.world). Cast micro-shadows are not modelled.
+  rover_sim.world.world). Cast micro-shadows are not modelled.
 
 ``detail`` scales every deviation from the mean soil albedo and the relief (Meridiani-like fine soil uses the
 appearance module's ``FINE_SOIL_FACTOR``: then pebbles and clasts all but vanish and stereo starves, as it did).

@@ -16,9 +16,9 @@ import numpy as np
 
 from rover_sim import interrupts
 from rover_sim.bench import write_json
-from rover_sim.mission import acceptance
-from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import scenario_from_dict
+from rover_sim.runtime import acceptance
+from rover_sim.runtime.run import run_scenario
+from rover_sim.scenario.loading import scenario_from_dict
 
 GOAL_DISTANCE_M = 20.0
 REACH_M = 1.0
@@ -93,7 +93,7 @@ def _rows(seeds: list[int], workers: int, overrides: tuple[str, ...] = ()):
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    from rover_sim.mission.sweep import init_worker
+    from rover_sim.apps.sweep import init_worker
 
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=min(workers, len(seeds)), mp_context=ctx, initializer=init_worker) as pool:

@@ -6,7 +6,7 @@ seed ``k % terrains`` (``terrains`` cratered plains, default one per five descen
 3.2 km plain takes about 10 s, rendering a descent about 0.5 s; each descent sees its own part of its plain from its
 own heading). Each descent's three images go through :func:`nav.dimes.estimate_velocity`; the error is the
 horizontal velocity estimate at the third image minus the truth. Then ``featureless_runs`` descents over a
-featureless plain (:data:`rover_sim.mission.descent.FEATURELESS_TERRAIN`) must all be rejected (no estimate).
+featureless plain (:data:`rover_sim.apps.descent.FEATURELESS_TERRAIN`) must all be rejected (no estimate).
 
 ``velocity_error_1sigma_mps`` is the 68.27th percentile of the error *magnitude* over the accepted estimates (for a
 2-D Gaussian error that is 1.5 times the per-axis sigma, so the figure is conservative); the RMS per-axis error is
@@ -24,11 +24,11 @@ import numpy as np
 
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported)
 from nav.dimes import DimesParams, DimesResult, estimate_velocity
+from rover_sim.apps.descent import FEATURELESS_TERRAIN, DescentConditions, DescentRun, DescentWorld
 from rover_sim.bench import write_json
-from rover_sim.mission import acceptance
-from rover_sim.mission.descent import FEATURELESS_TERRAIN, DescentConditions, DescentRun, DescentWorld
+from rover_sim.runtime import acceptance
 
-ACCEPT_1SIGMA_MPS = acceptance.DIMES.max_velocity_error_1sigma_m_s  # bars: rover_sim.mission.acceptance
+ACCEPT_1SIGMA_MPS = acceptance.DIMES.max_velocity_error_1sigma_m_s  # bars: rover_sim.runtime.acceptance
 MAX_WIND_MPS = 20.0
 WIND_BINS_MPS = (0.0, 5.0, 10.0, 15.0, 20.0)
 FEATURELESS_SEED_OFFSET = 10_000  # conditions seeds of the featureless descents

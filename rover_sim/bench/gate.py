@@ -4,7 +4,7 @@ A baseline (``benchmarks/suite_baseline.json``, or the user's own file) stores, 
 value on every gate seed, the environment it was recorded in, and the same figures from a second run of the same
 code under a seeded perturbation of the initial state (``physics.perturb_size``): the spread another machine would
 show. The gate pairs the current run with the baseline seed by seed; the test, its family-wise control and the
-effect-size floors are :data:`rover_sim.mission.acceptance.GATE` (the one judge); the minimum detectable change
+effect-size floors are :data:`rover_sim.runtime.acceptance.GATE` (the one judge); the minimum detectable change
 is computed from the baseline's perturbed spread with the same test
 (:func:`rover_sim.bench.stats.min_detectable_shift`), never from identical replays.
 """
@@ -20,8 +20,8 @@ import numpy as np
 
 from rover_sim.bench import stats
 from rover_sim.errors import ConfigError
-from rover_sim.mission import acceptance
-from rover_sim.mission.acceptance import GATE, GateMetric
+from rover_sim.runtime import acceptance
+from rover_sim.runtime.acceptance import GATE, GateMetric
 
 BASELINE_FORMAT = "rover-sim suite baseline 2"
 PerSeed = dict[int, float | None]  # seed -> value (None: not measured on that seed)

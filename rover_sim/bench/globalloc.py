@@ -7,7 +7,7 @@ panorama (:mod:`rover_sim.orbital.panorama`, flight sensor profile) and a prior 
 told: 12 m per axis (3 sigma = 36 m) and 1.75 deg (the std of the yaw draw). Every localiser (the built-in, plugins)
 gets the same stops; errors are against the truth in the site frame (the map's registration error included).
 Panoramas are cached (``--cache``) so that localisers can be compared without rendering again.
-The verdict: :func:`rover_sim.mission.acceptance.judge_globalloc`.
+The verdict: :func:`rover_sim.runtime.acceptance.judge_globalloc`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from nav.camera import StereoRig
 from nav.globalloc import OrbitalMap, PanoramaView
 from rover_sim.bench import write_json
 from rover_sim.bench.globalloc_sites import TERRAINS, site_scenario, stops_xy_yaw
-from rover_sim.mission import acceptance
+from rover_sim.runtime import acceptance
 
 PRIOR_MIN_M, PRIOR_MAX_M, PRIOR_YAW_DEG = 2.0, 35.0, 3.0
 PRIOR_SIGMA_M, PRIOR_SIGMA_YAW_DEG = 12.0, 1.75
@@ -78,10 +78,10 @@ def acquire_site(terrain: str, seed: int, n_stops: int, cache: Path, progress=pr
     path = cache / f"{terrain}_{seed}.npz"
     if path.is_file():
         return load_site(path)
-    from rover_sim.mission.scenario import scenario_from_dict
-    from rover_sim.mission.survey import RockSiteSurvey, SurveyConfig
+    from rover_sim.apps.survey import RockSiteSurvey, SurveyConfig
     from rover_sim.orbital.panorama import gentle_spot, onboard_attitude, place_rover, take_panorama, true_pose_xy_yaw
     from rover_sim.orbital.products import make_products, site_boxes
+    from rover_sim.scenario.loading import scenario_from_dict
 
     xyyaw = stops_xy_yaw(seed, n_stops)
     sc = scenario_from_dict(site_scenario(terrain, seed, xyyaw), source=f"bench globalloc {terrain}")
@@ -190,7 +190,7 @@ def bench_globalloc(
     stops_per_seed: int = STOPS_PER_SEED,
     cache: str | Path = "runs/globalloc_cache",
 ) -> dict:
-    from rover_sim.mission.plugins import make_global_localizer
+    from rover_sim.runtime.plugins import make_global_localizer
 
     names = ["builtin", *(localizers or [])]
     impls = {n: make_global_localizer(n) for n in names}

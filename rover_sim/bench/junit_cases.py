@@ -4,7 +4,7 @@ a failure's message is the unmet criterion with the measured value. Written by :
 from __future__ import annotations
 
 from rover_sim.io.junit import Case, case
-from rover_sim.mission import acceptance
+from rover_sim.runtime import acceptance
 
 
 def slip_cases(result: dict) -> list[Case]:

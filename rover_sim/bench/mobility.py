@@ -31,7 +31,8 @@ from rover_sim.bench import write_json
 from rover_sim.bench.slip import SLOPES_DEG, START_X_M, SlipRow, anchor, passes
 from rover_sim.sim.drive import MAX_WHEEL_SPEED_M_S, TICK_S, Straight, execute
 from rover_sim.sim.physics import RoverSim
-from rover_sim.sim.terramechanics_wr import SAND, WheelParams, WheelSoilLaw
+from rover_sim.sim.soil_tables import WheelParams
+from rover_sim.sim.terramechanics_wr import SAND, WheelSoilLaw
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
 
 CELL_M = 0.04  # the scenarios' cell size

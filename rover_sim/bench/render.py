@@ -20,10 +20,11 @@ import cv2
 import numpy as np
 
 from rover_sim.render.cameras import save_rig
-from rover_sim.render.renderer import RenderConfig, StereoRenderer, terrain_texture
+from rover_sim.render.config import RenderConfig
+from rover_sim.render.renderer import StereoRenderer, terrain_texture
+from rover_sim.sim.assembly import Sun
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.sensors import point_mast
-from rover_sim.sim.world import Sun
 from terrains import Terrain, TerrainRecipe, synthesize
 
 BENCH_SEED = 0

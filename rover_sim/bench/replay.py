@@ -17,12 +17,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from nav.trajectory import Pose
-from rover_sim.mission import acceptance
-from rover_sim.mission.evaluator import Evaluator
-from rover_sim.mission.observation import Observation
-from rover_sim.mission.onboard import VoStep
-from rover_sim.mission.pipeline import Mission, onboard_for
-from rover_sim.mission.sweep import Job, JobResult, failed_result
+from rover_sim.apps.sweep import failed_result
+from rover_sim.apps.sweep_jobs import Job, JobResult
+from rover_sim.runtime import acceptance
+from rover_sim.runtime.evaluator import Evaluator
+from rover_sim.runtime.onboard import VoStep
+from rover_sim.runtime.runner import Mission, onboard_for
+from rover_sim.world.observation import Observation
 
 
 class ReplayedVO:
@@ -79,13 +80,13 @@ class ReplayedVO:
 
 
 def run_job_with_replays(job: Job, jobs_dir: str) -> JobResult:
-    """A sweep job (see :func:`rover_sim.mission.sweep.run_job`) with the VOs of ``job.params["replay"]``
+    """A sweep job (see :func:`rover_sim.apps.sweep.run_job`) with the VOs of ``job.params["replay"]``
     (label -> import path) replayed on the run's inputs; their metrics under ``metrics["replays"]``."""
     job_dir = Path(jobs_dir) / job.job_id
     replays: list[ReplayedVO] = []
     try:
-        from rover_sim.mission.run import run_scenario
-        from rover_sim.mission.scenario import Scenario
+        from rover_sim.runtime.run import run_scenario
+        from rover_sim.scenario.schema import Scenario
 
         def attach(mission: Mission) -> None:
             if mission.onboard.vo is None:

@@ -3,7 +3,7 @@
 The rover starts at the first site and drives to the others with the runner's VO-corrected goto (dead reckoning and
 VO are both measured on this drive: the runner keeps a wheel/IMU dead reckoner beside the VO-corrected one). At
 every site it takes a navcam stereo panorama; rocks are extracted and modelled, matched between every two sites up to
-26 m apart, and the chain of sites is adjusted (:mod:`rover_sim.mission.survey`, :mod:`nav.rocks`). Figures against the
+26 m apart, and the chain of sites is adjusted (:mod:`rover_sim.apps.survey`, :mod:`nav.rocks`). Figures against the
 terrain's rock list and the simulator's true poses:
 
 * extraction: recall of generated rocks taller than 20 cm within 30 m of each site, precision of the extracted
@@ -37,27 +37,23 @@ import numpy as np
 
 from nav.epipolar import EpipolarCheck
 from nav.rocks import ROCK_SHAPES
-from rover_sim.mission import acceptance
-from rover_sim.mission.scenario import load_scenario
-from rover_sim.mission.survey import (
+from rover_sim.apps.survey import RangeCalibration, RockSiteSurvey, SurveyConfig, adjust_chain, calibrate_range_bias
+from rover_sim.apps.survey_eval import (
     ExtractionEval,
     MatchEval,
-    RangeCalibration,
-    RockSiteSurvey,
-    SurveyConfig,
-    adjust_chain,
     associate,
-    calibrate_range_bias,
     evaluate_chain,
     evaluate_extraction,
     evaluate_match,
     rocks_in_true_frame,
 )
+from rover_sim.runtime import acceptance
+from rover_sim.scenario.loading import load_scenario
 from terrains import Terrain, rock_class
 
 SCENARIO = "rock_localization"
 MAX_MATCH_SEPARATION_M = 26.0
-ACCEPT = dataclasses.asdict(acceptance.ROCKS)  # the bars live in rover_sim.mission.acceptance
+ACCEPT = dataclasses.asdict(acceptance.ROCKS)  # the bars live in rover_sim.runtime.acceptance
 NAVCAM_BASELINE_M = 0.2  # for reporting the fitted bias as a toe-in angle
 
 
@@ -231,7 +227,7 @@ def _range_bias(cal: RangeCalibration, raw_total: ExtractionEval, raw_sites: lis
 
 def _by_class(sites: list, terrain: Terrain, max_range_m: float = 30.0, min_height_m: float = 0.2) -> dict:
     """Recall, precision and median model RMS per rock class ("analytic", "irregular"), summed over the sites (the
-    same targets and association as :func:`rover_sim.mission.survey.evaluate_extraction`)."""
+    same targets and association as :func:`rover_sim.apps.survey_eval.evaluate_extraction`)."""
     truth = terrain.rocks
     classes = np.array([rock_class(r) for r in truth])
     txy = np.array([[r.x_m, r.y_m] for r in truth]).reshape(-1, 2)

@@ -1,6 +1,6 @@
 """Scenarios over seeds: the runs behind ``bench suite`` and ``bench vo``, and what is read from each.
 
-Every (case, profile, seed) is one job of the sweep engine (:func:`rover_sim.mission.sweep.run_jobs`): local spawn
+Every (case, profile, seed) is one job of the sweep engine (:func:`rover_sim.apps.sweep.run_jobs`): local spawn
 workers (``--workers``) or a Dask scheduler (``--scheduler``), each job its own closed-loop run, so the results are
 the same whatever the worker count. A case is a scenario (catalogue name, TOML path or a :class:`Scenario`) with
 its own ``--set`` overrides; the profile and the perturbation are overrides too, so they are part of a job's id.
@@ -13,10 +13,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rover_sim.apps.sweep import job_id_of, run_job, run_jobs
+from rover_sim.apps.sweep_jobs import Job, JobResult
 from rover_sim.bench import stats
-from rover_sim.mission import acceptance
-from rover_sim.mission.scenario import Scenario, load_scenario, scenario_from_dict
-from rover_sim.mission.sweep import Job, JobResult, job_id_of, run_job, run_jobs
+from rover_sim.runtime import acceptance
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
+from rover_sim.scenario.schema import Scenario
 
 
 @dataclass(frozen=True)

@@ -34,8 +34,9 @@ from nav.stereo import (
 from rover_sim.bench import write_json
 from rover_sim.bench.stereo_flight import render_flight_pair
 from rover_sim.errors import ConfigError
-from rover_sim.mission import acceptance
-from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoRenderer, terrain_texture
+from rover_sim.render.config import ImageNoise, RenderConfig
+from rover_sim.render.renderer import StereoRenderer, terrain_texture
+from rover_sim.runtime import acceptance
 from rover_sim.sim.physics import RoverSim
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, TerrainRecipe, synthesize
 
@@ -294,7 +295,7 @@ def _time_ms(fn, repeats: int = 15) -> float:
 
 def _plugin_rows(name: str, pairs: list[SimPair], stereobm_ms: float) -> dict:
     """A user's :class:`nav.protocols.StereoMatcher` on the same pairs (guarded: errors name the plugin)."""
-    from rover_sim.mission.plugins import GuardedStereo, instantiate
+    from rover_sim.runtime.plugins import GuardedStereo, instantiate
 
     matcher = GuardedStereo(instantiate("stereo", name, StereoParams(num_disparities=NUM_DISPARITIES)), name)
     rows = []

@@ -2,7 +2,7 @@
 
 Each pair is rendered through the run's *true* lenses (:class:`~rover_sim.render.lens.TrueLens`, mounting rotation
 included) and the flight image formation, then rectified with the *onboard* calibration (seeded calibration errors,
-:class:`~rover_sim.mission.calibration.RunCalibration`), exactly what the onboard stack gets in the flight profile.
+:class:`~rover_sim.world.calibration.RunCalibration`), exactly what the onboard stack gets in the flight profile.
 
 Ground truth in the rectified frame follows the true correspondence, not the onboard belief: each scored 3D point
 (from the ideal depth render of the left MJCF camera) is projected through the true raw camera of each side, then
@@ -19,11 +19,12 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.lens import CameraModel
 from nav.rectify import StereoCalibration, rectification
-from rover_sim.mission.calibration import RunCalibration, build_true_lens
-from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.render.cameras import camera_model
+from rover_sim.render.config import RenderConfig
 from rover_sim.render.imaging import ImagingSpec
-from rover_sim.render.renderer import RenderConfig, StereoRenderer
+from rover_sim.render.renderer import StereoRenderer
+from rover_sim.scenario.lens_spec import LensErrorSpec
+from rover_sim.world.calibration import RunCalibration, build_true_lens
 
 FLIGHT_SEED_OFFSET = 1000  # calibration draws independent of the terrain seeds
 

@@ -7,7 +7,7 @@ Steps (:func:`bench_suite`):
    first :data:`GATE_SEEDS` of the gate set); the profiles: flight and ideal (``fast``: the baseline's);
 2. run every scenario x profile x seed (:mod:`rover_sim.bench.seeded`), the built-in stack and, beside it, each
    plugin stack (``--vo``/``--stereo``/``--planner``) on the same seeds;
-3. judge each scenario over its seeds (:func:`rover_sim.mission.acceptance.judge_distribution`) and, on the
+3. judge each scenario over its seeds (:func:`rover_sim.runtime.acceptance.judge_distribution`) and, on the
    baseline's profile, against the baseline seed by seed (:mod:`rover_sim.bench.gate`);
 4. print median [90 % CI] tables, the gate's table and the scorecard; write JSON, JUnit and a box-plot PNG.
 """
@@ -23,9 +23,9 @@ from rover_sim.bench.environment import environment
 from rover_sim.bench.seeded import METRICS, Case, SeedRuns, cell, run_seeded
 from rover_sim.bench.seeds import Seeds
 from rover_sim.io.junit import Case as JunitCase
-from rover_sim.mission import acceptance
-from rover_sim.mission.scenario import catalogue, load_scenario
 from rover_sim.resources import suite_baseline_path
+from rover_sim.runtime import acceptance
+from rover_sim.scenario.loading import catalogue, load_scenario
 
 BASELINE_PROFILE = "flight"  # the profile the gate runs and the committed baseline was recorded on
 PROFILES = ("flight", "ideal")

@@ -17,12 +17,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from rover_sim.apps.sweep import default_workers, run_sweep
+from rover_sim.apps.sweep_jobs import SweepResult
 from rover_sim.bench import write_json
-from rover_sim.mission import acceptance
-from rover_sim.mission.sweep import SweepResult, default_workers, run_sweep
+from rover_sim.runtime import acceptance
 
 GRID = ("terrain.slope.slope_deg=0,5,10,15", "terrain.material.kind=sand,bedrock")
-ACCEPT_RATIO = acceptance.SWEEP.max_parallel_ratio  # bars: rover_sim.mission.acceptance
+ACCEPT_RATIO = acceptance.SWEEP.max_parallel_ratio  # bars: rover_sim.runtime.acceptance
 DRIVE_M = 10.0  # per job: a few seconds on one idle core (setup ~0.7 s, 200 s of physics, outputs)
 
 SCENARIO_TOML = """
@@ -98,7 +99,7 @@ def bench_sweep(
     json_path: str | None = None, workers: int = 2, drive_m: float = DRIVE_M, out_root: Path | None = None
 ) -> dict:
     """Serial vs ``workers``-process sweep of 8 short jobs; prints a markdown table and returns (and writes) a dict."""
-    import rover_sim.mission.pipeline  # noqa: F401  (imported before timing: the serial run starts warm)
+    import rover_sim.runtime.runner  # noqa: F401  (imported before timing: the serial run starts warm)
 
     with tempfile.TemporaryDirectory(prefix="bench_sweep_") as tmp:
         root = Path(out_root) if out_root is not None else Path(tmp)

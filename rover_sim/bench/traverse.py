@@ -52,9 +52,9 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
     import numpy as np
 
     from rover_sim.io.recording import RerunRecorder
-    from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.run import sol_recording, write_outputs
-    from rover_sim.mission.scenario import load_scenario
+    from rover_sim.runtime.run import sol_recording, write_outputs
+    from rover_sim.runtime.runner import Mission
+    from rover_sim.scenario.loading import load_scenario
 
     sc = load_scenario(CASES[name], list(overrides))
     out = Path(out_dir) / name
@@ -148,7 +148,7 @@ def _run_isolated(name: str, out_dir: str, overrides: tuple[str, ...]) -> dict:
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    from rover_sim.mission.sweep import init_worker
+    from rover_sim.apps.sweep import init_worker
 
     ctx = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=1, mp_context=ctx, initializer=init_worker) as pool:

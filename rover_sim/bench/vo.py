@@ -3,7 +3,7 @@
 Each case is a catalogue scenario run closed loop (physics, rendering, sensors, the nav stack), on every seed of
 ``--seeds`` (default: the first 8 of the published set). Per case and variant: each figure's median [90 % CI],
 the scenario's verdict over the seeds (its per-run criteria, its pass rate and distribution bounds, judged by
-:mod:`rover_sim.mission.acceptance`), and VO's covariance consistency (NEES). The variants: MER VO on the flight
+:mod:`rover_sim.runtime.acceptance`), and VO's covariance consistency (NEES). The variants: MER VO on the flight
 profile (judged), and unless ``quick`` on the ideal profile and with the full-pose update (reported), plus each
 ``--vo`` plugin on the flight profile (judged), all on the same seeds.
 """
@@ -18,7 +18,8 @@ from rover_sim.bench.seeded import Case, SeedRuns, cell, run_seeded
 from rover_sim.bench.seeds import Seeds
 from rover_sim.bench.suite import StackResult, finite, interrupt_of, print_tables, scorecard, stack_json
 from rover_sim.io.junit import Case as JunitCase
-from rover_sim.mission.scenario import Scenario, plugin_overrides
+from rover_sim.scenario.loading import plugin_overrides
+from rover_sim.scenario.schema import Scenario
 
 VO_CASES: dict[str, str] = {
     "msstb": "msstb_rock_course",

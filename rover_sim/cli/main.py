@@ -8,217 +8,31 @@ from typing import Annotated
 import typer
 
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported anywhere)
+from rover_sim.cli.bench import bench_app
 from rover_sim.cli.export import export_cmd
+from rover_sim.cli.options import JunitOpt, PlannerOpt, SetOpt, StereoOpt, VoOpt, bad_input
 from rover_sim.cli.orbital import bench_globalloc_cmd, orbital_cmd
 from rover_sim.cli.status import finish, guarded
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
 
 app = typer.Typer(help="MER-class rover simulator with a MER-style navigation stack.", no_args_is_help=True)
-bench_app = typer.Typer(help="Benchmarks: print a markdown table, optionally write JSON.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 app.command("view")(view_cmd)
 
-JsonOpt = Annotated[Path | None, typer.Option("--json", help="Write the results as JSON to this path.")]
-_IMPL = "an import path 'pkg.module:Class' or an entry point in 'rover_sim.plugins'"
-VoOpt = Annotated[str | None, typer.Option("--vo", help=f"Visual odometer: {_IMPL} (nav.protocols.VisualOdometer).")]
-StereoOpt = Annotated[
-    str | None, typer.Option("--stereo", help=f"Stereo matcher: {_IMPL} (nav.protocols.StereoMatcher).")
-]
-PlannerOpt = Annotated[str | None, typer.Option("--planner", help=f"Planner: {_IMPL} (nav.protocols.Planner).")]
-JunitOpt = Annotated[
-    Path | None, typer.Option("--junit", help="Write JUnit XML (one test case per scenario/case) to this path.")
-]
-
-
 RENDER_PX = (16, 2048)  # `render --resolution`: MuJoCo's offscreen buffer is allocated at this size
-
-
-def _fail(err: Exception) -> None:
-    typer.secho(f"error: {err}", fg=typer.colors.RED, err=True)
-    raise typer.Exit(code=2)
 
 
 @app.command("check-gl")
 def check_gl_cmd() -> None:
     """Check that offscreen rendering (EGL) works; prints the install hint if it does not."""
-    from rover_sim.render.renderer import check_gl
+    from rover_sim.render.gl import check_gl
 
     try:
         check_gl()
     except RoverSimError as e:
-        _fail(e)
+        bad_input(e)
     typer.echo("offscreen rendering OK (MUJOCO_GL=egl)")
-
-
-SoilModelOpt = Annotated[
-    str,
-    typer.Option(
-        "--soil-model",
-        help="wong_reece (default: the mobility benchmark of the default law, deformable terrain; writes --png) or "
-        "bekker (the slip table of the earlier patch law).",
-    ),
-]
-
-
-@bench_app.command("slip")
-def bench_slip(
-    json: JsonOpt = None,
-    seed: int = 0,
-    junit: JunitOpt = None,
-    soil_model: SoilModelOpt = "wong_reece",
-    png: Annotated[str, typer.Option(help="wong_reece only: PNG of DP/W vs slip and slip vs slope.")] = (
-        "runs/bench_slip.png"
-    ),
-) -> None:
-    """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
-    if soil_model not in ("bekker", "wong_reece"):
-        _fail(ValueError(f"--soil-model must be 'bekker' or 'wong_reece', not {soil_model!r}"))
-    with guarded():
-        if soil_model == "wong_reece":
-            from rover_sim.bench import mobility
-            from rover_sim.bench.junit_cases import mobility_cases
-
-            result = mobility.run(str(json) if json else None, seed=seed, png_path=png)
-            cases = mobility_cases(result)
-        else:
-            from rover_sim.bench import slip
-            from rover_sim.bench.junit_cases import slip_cases
-
-            result = slip.run(str(json) if json else None, seed=seed)
-            cases = slip_cases(result)
-    finish(junit, "bench slip", cases)
-
-
-@bench_app.command("render")
-def bench_render_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
-    """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
-    with guarded():
-        from rover_sim.bench.junit_cases import render_cases
-        from rover_sim.bench.render import bench_render
-
-        result = bench_render(str(json) if json else None)
-    finish(junit, "bench render", render_cases(result))
-
-
-@bench_app.command("stereo")
-def bench_stereo_cmd(
-    json: JsonOpt = None,
-    stereo: Annotated[
-        list[str] | None, typer.Option("--stereo", help=f"Also run this stereo matcher ({_IMPL}); repeatable.")
-    ] = None,
-    junit: JunitOpt = None,
-    profile: Annotated[str, typer.Option("--profile", help="Pairs: flight (and ideal beside it) | ideal.")] = "flight",
-) -> None:
-    """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px) at
-    256x256 and 1024x1024; any --stereo plugin on the same 256 px pairs."""
-    with guarded():
-        from rover_sim.bench.junit_cases import stereo_cases
-        from rover_sim.bench.stereo import bench_stereo
-
-        r = bench_stereo(str(json) if json else None, plugins=stereo or None, profile=profile)
-    finish(junit, "bench stereo", stereo_cases(r))
-
-
-@bench_app.command("autonav")
-def bench_autonav_cmd(
-    json: JsonOpt = None,
-    runs: Annotated[int, typer.Option(help="Number of seeded rock fields.")] = 20,
-    first_seed: Annotated[int, typer.Option(help="Seed of the first field.")] = 0,
-    seed: Annotated[list[int] | None, typer.Option(help="Run only these seeds (repeatable).")] = None,
-    workers: Annotated[int, typer.Option(help="Fields run at once (spawn pool; cycle times then share cores).")] = 1,
-    stereo: StereoOpt = None,
-    planner: PlannerOpt = None,
-    vo: VoOpt = None,
-    junit: JunitOpt = None,
-) -> None:
-    """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away); with --planner,
-    --stereo or --vo the same fields run again with those parts swapped in."""
-    path = str(json) if json else None
-    with guarded():
-        from rover_sim.bench.autonav import bench_autonav
-        from rover_sim.bench.junit_cases import autonav_cases
-        from rover_sim.mission.scenario import plugin_overrides
-
-        r = bench_autonav(path, runs=runs, first_seed=first_seed, workers=workers, seeds=seed)
-        cases = autonav_cases(r)
-        overrides = plugin_overrides(vo, stereo, planner)
-        if overrides and not any(c.error for c in cases):
-            label = ", ".join(x for x in (vo, stereo, planner) if x)
-            plugin_path = str(Path(path).with_suffix(".plugins.json")) if path else None
-            rp = bench_autonav(plugin_path, runs=runs, first_seed=first_seed, workers=workers, seeds=seed,
-                               overrides=tuple(overrides), label=label)  # fmt: skip
-            cases += autonav_cases(rp)
-    finish(junit, "bench autonav", cases)
-
-
-@bench_app.command("traverse")
-def bench_traverse_cmd(
-    json: JsonOpt = None,
-    case: Annotated[list[str] | None, typer.Option(help="Run only these cases (repeatable).")] = None,
-    out: Annotated[Path, typer.Option(help="Where each case writes its outputs and recording.")] = Path(
-        "runs/bench_traverse"
-    ),
-    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a field of every case.")] = None,
-    junit: JunitOpt = None,
-) -> None:
-    """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
-    100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
-    with guarded():
-        from rover_sim.bench.junit_cases import traverse_cases
-        from rover_sim.bench.traverse import bench_traverse
-
-        r = bench_traverse(str(json) if json else None, str(out), case or None, tuple(set_ or ()))
-    finish(junit, "bench traverse", traverse_cases(r))
-
-
-@bench_app.command("dimes")
-def bench_dimes_cmd(
-    json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50, junit: JunitOpt = None
-) -> None:
-    """DIMES: Monte-Carlo descents over winds and terrains; horizontal velocity error and featureless rejection."""
-    with guarded():
-        from rover_sim.bench.dimes import bench_dimes
-        from rover_sim.bench.junit_cases import dimes_cases
-
-        result = bench_dimes(str(json) if json else None, runs=runs)
-    finish(junit, "bench dimes", dimes_cases(result))
-
-
-@bench_app.command("sweep")
-def bench_sweep_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
-    """Sweep speed: 8 short jobs serially and on a 2-worker pool (acceptance: parallel <= 0.65x serial)."""
-    with guarded():
-        from rover_sim.bench.junit_cases import sweep_cases
-        from rover_sim.bench.sweep import bench_sweep
-
-        result = bench_sweep(str(json) if json else None)
-    finish(junit, "bench sweep", sweep_cases(result))
-
-
-@bench_app.command("rocks")
-def bench_rocks_cmd(
-    json: JsonOpt = None,
-    seed: Annotated[int | None, typer.Option(help="Replace the scenario seed (another rock field).")] = None,
-    junit: JunitOpt = None,
-    irregular_fraction: Annotated[
-        float | None,
-        typer.Option("--irregular-fraction", min=0.0, max=1.0, help="Fraction of irregular rocks (0..1)."),
-    ] = None,
-    profile: Annotated[
-        str | None, typer.Option("--profile", help="Sensor profile: flight | ideal (default: the scenario's).")
-    ] = None,
-) -> None:
-    """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
-    figures by rock class (analytic / irregular) with --irregular-fraction."""
-    with guarded():
-        from rover_sim.bench.junit_cases import rocks_cases
-        from rover_sim.bench.rocks import bench_rocks
-
-        result = bench_rocks(
-            str(json) if json else None, seed=seed, irregular_fraction=irregular_fraction, profile=profile
-        )
-    finish(junit, "bench rocks", rocks_cases(result))
 
 
 @app.command("render")
@@ -233,18 +47,18 @@ def render_cmd(
     import math
 
     from rover_sim.bench.render import HAZCAM_PAIRS, render_to_dir
-    from rover_sim.mission.scenario import load_scenario
-    from rover_sim.sim.world import Sun
+    from rover_sim.scenario.loading import load_scenario
+    from rover_sim.sim.assembly import Sun
 
     pairs = ("navcam", *HAZCAM_PAIRS)
     if pair not in pairs:
-        _fail(ValueError(f"--pair {pair!r}: choose from {', '.join(pairs)}"))
+        bad_input(ValueError(f"--pair {pair!r}: choose from {', '.join(pairs)}"))
     if not RENDER_PX[0] <= resolution <= RENDER_PX[1]:  # checked first: too large an offscreen buffer kills MuJoCo
-        _fail(ValueError(f"--resolution {resolution}: allowed {RENDER_PX[0]}..{RENDER_PX[1]} pixels"))
+        bad_input(ValueError(f"--resolution {resolution}: allowed {RENDER_PX[0]}..{RENDER_PX[1]} pixels"))
     try:
         sc = load_scenario(scenario, seed=seed)
     except RoverSimError as e:
-        _fail(e)
+        bad_input(e)
     st = sc.start
     files = render_to_dir(
         out,
@@ -258,170 +72,6 @@ def render_cmd(
     )
     for name, path in files.items():
         typer.echo(f"{name}: {path}")
-
-
-SeedsOpt = Annotated[
-    str | None,
-    typer.Option("--seeds", help="A count N (the first N of the command's seed set), a range A-B or a list A,B,C."),
-]
-PerturbOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--perturb",
-        help="EPS[:SEED]: add a seeded perturbation of EPS metres and radians to each run's settled initial state "
-        "(what another CPU or build does to a chaotic drive).",
-    ),
-]
-WorkersOpt = Annotated[
-    int | None, typer.Option("--workers", min=0, help="Local worker processes (0: in this process) [default: CPUs].")
-]
-SchedulerOpt = Annotated[
-    str | None, typer.Option("--scheduler", help="Run the jobs on this Dask scheduler (tcp://host:port) instead.")
-]
-
-
-@bench_app.command("report")
-def bench_report_cmd(
-    path: Annotated[Path, typer.Argument(help="A `bench suite --json` or `bench vo --json` file.")],
-) -> None:
-    """Print a benchmark JSON as markdown tables (median [90 % CI] per figure), with seeds, profile, cell size and
-    machine: the docs' benchmark pages are made this way from committed JSON."""
-    import json as _json
-
-    from rover_sim.bench.report import markdown
-
-    try:
-        data = _json.loads(path.read_text())
-        typer.echo(markdown(data))
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        _fail(ValueError(f"{path}: not a bench suite/vo JSON ({type(e).__name__}: {e})"))
-
-
-@bench_app.command("vo")
-def bench_vo_cmd(
-    json: JsonOpt = None,
-    vo: Annotated[
-        list[str] | None, typer.Option("--vo", help=f"Also run this visual odometer ({_IMPL}); repeatable.")
-    ] = None,
-    case: Annotated[list[str] | None, typer.Option("--case", help="Only these cases (repeatable).")] = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="Flight profile only: skip the ideal-profile and full-pose VO reruns.")
-    ] = False,
-    seeds: SeedsOpt = None,
-    perturb: PerturbOpt = None,
-    workers: WorkersOpt = None,
-    scheduler: SchedulerOpt = None,
-    junit: JunitOpt = None,
-) -> None:
-    """VO cases over seeds: MSSTB rock course, 30 m slope, featureless soil, rover shadow, flat benign ground; MER VO
-    beside any --vo plugins on the same seeds (default: the first 8 of the published set). Each case runs on the
-    flight sensor profile, and (unless --quick) again on the ideal profile and with the full-pose VO update; every
-    cell is a median [90 % CI] over the seeds."""
-    from rover_sim.bench.vo import VO_CASES
-
-    for c in case or []:
-        if c not in VO_CASES:
-            _fail(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
-    with guarded():
-        from rover_sim.bench.seeded import parse_perturb
-        from rover_sim.bench.seeds import parse_seeds
-        from rover_sim.bench.suite import PUBLISHED_SEEDS, interrupt_of
-        from rover_sim.bench.vo import bench_vo, junit_cases
-
-        chosen = parse_seeds(seeds, "published", PUBLISHED_SEEDS)
-        stacks, _ = bench_vo(str(json) if json else None, chosen, plugins=vo or None, cases=case or None,
-                             quick=quick, perturb=parse_perturb(perturb), workers=workers,
-                             scheduler=scheduler)  # fmt: skip
-        cases = junit_cases(stacks)
-        stop = interrupt_of(stacks)
-        if stop is not None:
-            from rover_sim.io.junit import write_junit
-
-            write_junit(junit, "bench vo", cases)
-            raise stop
-    finish(junit, "bench vo", cases)
-
-
-@bench_app.command("suite")
-def bench_suite_cmd(
-    json: JsonOpt = None,
-    fast: Annotated[
-        bool, typer.Option("--fast", help="The CI gate: scenarios with fast = true, on the gate seeds, flight profile.")
-    ] = False,
-    seeds: SeedsOpt = None,
-    update_baseline: Annotated[
-        bool,
-        typer.Option(
-            "--update-baseline", help="Record these seeds as the baseline (plus a perturbed run for the spread)."
-        ),
-    ] = False,
-    baseline: Annotated[
-        Path | None,
-        typer.Option("--baseline", help="Gate against this baseline file (yours) instead of the committed one."),
-    ] = None,
-    vo: VoOpt = None,
-    stereo: StereoOpt = None,
-    planner: PlannerOpt = None,
-    replay_vo: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--replay-vo",
-            help=f"Also run this visual odometer ({_IMPL}) on the built-in stack's identical inputs (open loop, "
-            "paired: every seed's images and IMU); reported and gated in the JSON, not in the exit status. "
-            "Repeatable.",
-        ),
-    ] = None,
-    perturb: PerturbOpt = None,
-    workers: WorkersOpt = None,
-    scheduler: SchedulerOpt = None,
-    png: Annotated[Path | None, typer.Option("--png", help="With a plugin: the scorecard's box plots.")] = None,
-    junit: JunitOpt = None,
-    profile: Annotated[
-        list[str] | None,
-        typer.Option("--profile", help="Sensor profile(s) to run, flight or ideal (repeatable) [default: both; "
-                     "--fast: flight]."),
-    ] = None,
-) -> None:
-    """Run the scenario catalogue over seeds: per scenario the median [90 % CI] of each figure and its verdict over
-    the seeds (the scenario's pass criteria per run, its pass rate and its bounds on medians and percentiles).
-
-    --fast is the CI gate: the fast scenarios on the gate seeds, compared seed by seed with the baseline (paired
-    exact signed-rank tests, Holm family-wise 1 %, effect-size floors; the minimum detectable change is printed).
-    With --vo/--stereo/--planner the same seeds run with those parts swapped in, side by side with the built-in
-    stack (a scorecard; --png draws its box plots). Exit status: 0 all scenarios hold, 1 a scenario failed or
-    regressed, 2 bad input, 130/143 interrupted."""
-    from rover_sim.resources import source_checkout
-
-    if update_baseline and baseline is None and source_checkout() is None:
-        _fail(ValueError("--update-baseline outside a source checkout needs --baseline PATH (the file to write)"))
-    for p in profile or []:
-        if p not in ("flight", "ideal"):
-            _fail(ValueError(f"--profile {p!r}: choose flight or ideal"))
-    with guarded():
-        from rover_sim.bench.seeded import parse_perturb
-        from rover_sim.bench.seeds import parse_seeds
-        from rover_sim.bench.suite import GATE_SEEDS, PUBLISHED_SEEDS, bench_suite, interrupt_of, junit_cases
-        from rover_sim.mission.scenario import plugin_overrides
-
-        chosen = parse_seeds(seeds, "gate" if fast else "published", GATE_SEEDS if fast else PUBLISHED_SEEDS)
-        sets = plugin_overrides(vo, stereo, planner)
-        plugins = {", ".join(x for x in (vo, stereo, planner) if x): sets} if sets else None
-        result = bench_suite(str(json) if json else None, chosen, fast=fast, profiles=tuple(profile or ()) or None,
-                             plugins=plugins, replay={v: v for v in replay_vo or []} or None,
-                             baseline_path=baseline, update_baseline=update_baseline,
-                             perturb=parse_perturb(perturb), workers=workers, scheduler=scheduler,
-                             png_path=png)  # fmt: skip
-        cases = junit_cases(result.stacks)
-        stop = interrupt_of(result.stacks)
-        if stop is not None:
-            from rover_sim.io.junit import write_junit
-
-            write_junit(junit, "bench suite", cases)
-            raise stop
-    finish(junit, "bench suite", cases)
-
-
-SetOpt = Annotated[list[str] | None, typer.Option("--set", help="Override a scenario field: dotted.key=value.")]
 
 
 @app.command("run")
@@ -451,8 +101,8 @@ def run_cmd(
     if out is None:
         out, overwrite = Path("runs/latest"), True
     with guarded():
-        from rover_sim.mission.run import run_scenario
-        from rover_sim.mission.scenario import load_scenario, plugin_overrides
+        from rover_sim.runtime.run import run_scenario
+        from rover_sim.scenario.loading import load_scenario, plugin_overrides
 
         overrides = plugin_overrides(vo, stereo, planner) + list(set_ or [])
         sc = load_scenario(scenario, overrides, seed)  # bad input is reported before --out is touched
@@ -477,13 +127,13 @@ def run_cmd(
 @app.command("scenarios")
 def scenarios_cmd() -> None:
     """List the scenario catalogue: name, `fast` (in the CI subset) and the first line of the description."""
-    from rover_sim.mission.scenario import catalogue, load_scenario
+    from rover_sim.scenario.loading import catalogue, load_scenario
 
     names = catalogue()
     if not names:
         from rover_sim.resources import scenarios_dir
 
-        _fail(FileNotFoundError(f"no scenario files (*.toml) in {scenarios_dir()}"))
+        bad_input(FileNotFoundError(f"no scenario files (*.toml) in {scenarios_dir()}"))
     width = max((len(n) for n in names), default=0)
     bad = False
     for name in names:
@@ -525,7 +175,7 @@ def sweep_cmd(
     set_: SetOpt = None,
 ) -> None:
     """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
-    from rover_sim.mission.sweep import run_sweep
+    from rover_sim.apps.sweep import run_sweep
 
     def report(done: int, total: int, job, result) -> None:
         if not result.ok:
@@ -551,7 +201,7 @@ def sweep_cmd(
             on_result=report,
         )
     except RoverSimError as e:
-        _fail(e)
+        bad_input(e)
     colour = typer.colors.RED if res.n_failed else typer.colors.GREEN
     typer.secho(
         f"{len(res.jobs)} jobs: {res.n_run} run, {res.n_cached} done before, {res.n_failed} failed "
@@ -578,7 +228,7 @@ def stereo_command(
     try:
         stereo_cmd(left, right, num_disparities, out, window_px)
     except RoverSimError as e:
-        _fail(e)
+        bad_input(e)
 
 
 app.command("export")(export_cmd)

@@ -21,9 +21,9 @@ def orbital_cmd(
     .tfw), orbital.json (frame, sun, error model with sources); a streamed site: tiles along the route."""
     with guarded():
         from rover_sim.cli.outdir import prepare_out_dir
-        from rover_sim.mission.scenario import load_scenario
         from rover_sim.orbital.files import spec_metadata, write_products
         from rover_sim.orbital.products import make_products, site_boxes
+        from rover_sim.scenario.loading import load_scenario
 
         sc = load_scenario(scenario, overrides=set_ or [], seed=seed)
         prepare_out_dir(out, overwrite)

@@ -1,6 +1,6 @@
 """What the mission logs (:class:`Recorder`) and the recorder that records nothing (:class:`NullRecorder`).
 
-The rerun implementation is :class:`rover_sim.io.recording.RerunRecorder`; both names are re-exported there.
+The rerun implementation is :class:`rover_sim.io.recording.RerunRecorder`.
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ The entity tree mirrors the frame tree (rerun ``nuscenes`` example style)::
     world/terrain/rocks                     Mesh3D of every rock, static
     world/terrain/tiles/t<x>_<y>[/rocks]    a streamed site: each tile once, coarse, when it first appears
     world/terrain/ground/t<i>_<j>           a deformable site (no world/terrain mesh): ground tiles on the timeline,
-                                            re-logged at full resolution when ruts change them (mission/rut_log.py)
+                                            re-logged at full resolution when ruts change them (io/rut_log.py)
     world/rover                             Transform3D (world <- rover) every tick
     world/rover/visual                      Boxes3D + Cylinders3D (body, deck, mast, 6 wheels), static
     world/rover/<camera>/{left,right}       Transform3D (rover <- camera, from T_rover_cam; re-logged only when it
@@ -53,10 +53,8 @@ import rerun.blueprint as rrb
 
 from rover_sim.io.blueprint import default_blueprint
 from rover_sim.io.columns import DEFAULT_FLUSH_ROWS, TIMELINE_SIM_TIME, TIMELINE_STEP, ColumnBuffer
-from rover_sim.io.recorder_protocol import NullRecorder, Recorder  # noqa: F401 - re-exported from here
-from rover_sim.io.recording_helpers import (  # noqa: F401 - TERRAIN_MAX_TRIANGLES re-exported from here
+from rover_sim.io.recording_helpers import (
     ROCK_RGBA,
-    TERRAIN_MAX_TRIANGLES,
     PolylineState,
     colour_of,
     ground_mesh,
@@ -67,7 +65,6 @@ from rover_sim.io.recording_helpers import (  # noqa: F401 - TERRAIN_MAX_TRIANGL
     tile_rocks,
     xyzw,
 )
-from rover_sim.io.rrd import entity_row_counts  # noqa: F401 - re-exported from here
 
 TILE_MESH_SIDE_PTS = 33  # a streamed tile's mesh in the recording: 25 cm spacing for an 8 m tile
 

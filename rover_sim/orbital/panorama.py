@@ -1,7 +1,7 @@
 """A navcam panorama at a stop, as a global localiser receives it: rectified pairs with their calibrated rigs, and
 the onboard attitude (IMU roll and pitch after standing, the onboard yaw).
 
-The pairs come from the rock survey's panorama acquisition (:meth:`rover_sim.mission.survey.RockSiteSurvey.
+The pairs come from the rock survey's panorama acquisition (:meth:`rover_sim.apps.survey.RockSiteSurvey.
 panorama_pair`: the scenario's sensor profile, true lenses and CCD chain, rectified on board with the calibrated
 models at the commanded pointing), so a global fix and a rock site see the same images.
 """
@@ -14,7 +14,7 @@ import numpy as np
 
 from nav.geometry import quat_wxyz_to_R
 from nav.globalloc import PanoramaView
-from rover_sim.mission.survey import MAST_SETTLE_S, REST_BEFORE_PANORAMA_S, RockSiteSurvey
+from rover_sim.apps.survey import MAST_SETTLE_S, REST_BEFORE_PANORAMA_S, RockSiteSurvey
 
 PAN_STEP_DEG = 45.0  # eight pairs cover 360 deg with the navcam's 45 deg field of view
 ELEVATION_DEG = -12.0  # the frames span ~2.5 m from the mast to the horizon

@@ -27,10 +27,11 @@ from scipy.spatial import cKDTree
 
 from nav.globalloc.maps import OrbitalMap, Raster
 from rover_sim.orbital.spec import OrbitalSpec
-from rover_sim.render.renderer import LUMA_WEIGHTS, RenderConfig
-from rover_sim.render.window import ROCK_TINT_RGB
+from rover_sim.render.config import RenderConfig
+from rover_sim.render.render_world import ROCK_TINT_RGB
+from rover_sim.render.renderer import LUMA_WEIGHTS
+from rover_sim.sim.assembly import Sun
 from rover_sim.sim.ephemeris import sun_azimuth_elevation_deg
-from rover_sim.sim.world import Sun
 from terrains import Terrain, albedo_texture, rock_albedo, synthesize
 from terrains.appearance import MARS_TINT_RGB
 from terrains.regolith import regolith_albedo

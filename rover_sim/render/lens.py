@@ -30,7 +30,6 @@ import numpy as np
 
 from nav.camera import PinholeCamera
 from nav.lens import CahvorCamera, CameraModel, FisheyeCamera, pixel_grid
-from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.render.cameras import STEREO_PAIRS
 
 EDGE_MARGIN_PX = 2.0  # render pixels kept beyond the outermost raw ray (bilinear neighbours)
@@ -40,13 +39,16 @@ def pair_of(cam_name: str) -> str:
     return cam_name.removesuffix("_left").removesuffix("_right")
 
 
-def nominal_model(pinhole: PinholeCamera, spec: LensErrorSpec) -> CameraModel:
-    """The lens design of ``pinhole``'s camera: CAHVOR for navcams, f-theta Kannala-Brandt for hazcams, with the
-    MJCF field of view (navcam: the pinhole's focal length; hazcam: its width spans the MJCF ``fovy``)."""
+def nominal_model(
+    pinhole: PinholeCamera, navcam_r: tuple[float, float, float], hazcam_k: tuple[float, float, float, float]
+) -> CameraModel:
+    """The lens design of ``pinhole``'s camera: CAHVOR for navcams (radial terms ``navcam_r``), f-theta
+    Kannala-Brandt for hazcams (``hazcam_k``), with the MJCF field of view (navcam: the pinhole's focal length;
+    hazcam: its width spans the MJCF ``fovy``). The terms are ``[sensors.lens]``'s."""
     if pinhole.name.startswith("navcam"):
-        return CahvorCamera.from_pinhole(pinhole, r=spec.navcam_r)
+        return CahvorCamera.from_pinhole(pinhole, r=navcam_r)
     return FisheyeCamera.from_fov(pinhole.name, pinhole.width_px, pinhole.height_px, pinhole.hfov_deg,
-                                  k=spec.hazcam_k, T_rover_cam=pinhole.T_rover_cam)  # fmt: skip
+                                  k=hazcam_k, T_rover_cam=pinhole.T_rover_cam)  # fmt: skip
 
 
 def with_rotation(model: CameraModel, R: np.ndarray) -> CameraModel:
@@ -107,19 +109,22 @@ class IdentityLens:
 
 class TrueLens:
     """The true raw cameras of the pairs in ``models`` at ``native_px`` (models hold the mounting rotation as
-    ``T_rover_cam``; a pair without models cannot be drawn through this lens)."""
+    ``T_rover_cam``; a pair without models cannot be drawn through this lens). ``render_oversample`` and
+    ``hazcam_max_off_axis_deg`` are ``[sensors.lens]``'s (:mod:`rover_sim.scenario.lens_spec`)."""
 
-    def __init__(self, models: dict[str, CameraModel], spec: LensErrorSpec) -> None:
+    def __init__(
+        self, models: dict[str, CameraModel], render_oversample: float, hazcam_max_off_axis_deg: float
+    ) -> None:
         self.models = models
         # above 1x, a raw pixel integrates over its area of the finer render (a CCD photosite does; a point
         # sample of the finer render would be sharper than any camera): a Gaussian with the variance of a box one
         # raw pixel wide, ``oversample^2 / 12`` render px^2, before the remap
-        self.area_sigma_px = spec.render_oversample / math.sqrt(12.0) if spec.render_oversample > 1.0 else 0.0
+        self.area_sigma_px = render_oversample / math.sqrt(12.0) if render_oversample > 1.0 else 0.0
         self.views: dict[str, RenderView] = {}
         for pair in (p for p in STEREO_PAIRS if f"{p}_left" in models):
             ms = [models[f"{pair}_left"], models[f"{pair}_right"]]
-            limit = None if pair == "navcam" else spec.hazcam_max_off_axis_deg
-            self.views[pair] = render_view(ms, limit, spec.render_oversample)
+            limit = None if pair == "navcam" else hazcam_max_off_axis_deg
+            self.views[pair] = render_view(ms, limit, render_oversample)
         self.max_render_px = max(v.px for v in self.views.values())
 
     @contextmanager

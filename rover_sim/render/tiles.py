@@ -1,6 +1,6 @@
 """Render-only terrain tiles: the heightfield cut into square tiles, each as a chain of level-of-detail meshes.
 
-:class:`rover_sim.render.renderer.RenderWorld` draws them in place of the physics hfield (see the renderer's
+:class:`rover_sim.render.render_world.RenderWorld` draws them in place of the physics hfield (see the renderer's
 module docstring and :class:`TerrainTiles`).
 """
 

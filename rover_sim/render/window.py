@@ -22,28 +22,12 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from rover_sim.render.render_world import ROCK_MATERIAL, rock_rgba, slot_box
 from rover_sim.render.tiles import GROUP_HIDDEN, GROUP_SHOWN, tile_meshes, write_tile_meshes
-from rover_sim.sim.world import ROCK_GEOM_PREFIX
+from rover_sim.sim.assembly import ROCK_GEOM_PREFIX
 
 if TYPE_CHECKING:
-    from rover_sim.render.renderer import RenderWorld
-
-ROCK_MATERIAL = "rock_textured"
-ROCK_TINT_RGB = (0.82, 0.70, 0.60)  # dust-coated basalt: greyer than the butterscotch soil
-
-
-def rock_rgba(rock: object, seed: int) -> list[float]:
-    """A rock's colour: its own grey level (``terrains.rock_albedo``) times the dusty-basalt tint."""
-    from terrains import rock_albedo
-
-    return [*(rock_albedo(rock, seed) * np.asarray(ROCK_TINT_RGB)), 1.0]
-
-
-def slot_box(rock: object) -> list[np.ndarray]:
-    """World AABB (min, max) of a streamed rock slot (an ellipsoid primitive) from its footprint and height."""
-    r = rock.footprint_radius_m  # type: ignore[attr-defined]
-    x, y, z, h = rock.x_m, rock.y_m, rock.z_base_m, rock.height_m  # type: ignore[attr-defined]
-    return [np.array([x - r, y - r, z - h]), np.array([x + r, y + r, z + h])]
+    from rover_sim.render.render_world import RenderWorld
 
 
 def follow_window(world: RenderWorld, contexts: list[mujoco.Renderer], texture_rgb: np.ndarray | None) -> bool:

@@ -12,9 +12,10 @@ that sinkage becomes geometry, as in Chrono's SCM but on MuJoCo's heightfield gr
   soil's angle of repose (``REPOSE_DEG``, loose sand 30-35 deg) to the undisturbed surface, as loose soil
   slumps into a rut's sides;
 * **berms**: the soil a wheel pushes down is put back beside the rut (the cells from the walls' top out to
-  ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally; wider beside a deeper rut, so a wheel digging in
-  spreads the soil outward: its crest stays about as low as the rut is deep, up to 1.24x where wheels dig in
-  as they start, tests/rover_sim/test_purgatory.py): volume is conserved to the grid's resolution;
+  ``max(BERM_CELLS cells, BERM_SPREAD z)`` beyond, equally, constants of :mod:`rover_sim.sim.wr_kernel`; wider
+  beside a deeper rut, so a wheel digging in spreads the soil outward: its crest stays about as low as the rut is
+  deep, up to 1.24x where wheels dig in as they start, tests/rover_sim/test_purgatory.py): volume is conserved to
+  the grid's resolution;
 * **multipass / compaction**: a rut is plastic: a later wheel deepens it only where its own sinkage is larger
   (SCM's loading-only-beyond-the-previous-maximum); the law is told the rut depth ahead of each wheel
   (``law.presink_m``), so only the new compaction resists (a second pass sinks less and rolls easier);
@@ -34,14 +35,12 @@ cells changed since the last render (:meth:`DeformableTerrain.pop_dirty_cells`) 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from nav.types import WHEELS
-from rover_sim.sim.wr_kernel import (  # noqa: F401 - the rut's shape constants, documented above
-    BERM_CELLS,
-    BERM_SPREAD,
+from rover_sim.sim.wr_kernel import (
     P_ALPHA,
     P_BASE,
     P_CELL,
@@ -50,22 +49,37 @@ from rover_sim.sim.wr_kernel import (  # noqa: F401 - the rut's shape constants,
     P_WIDTH,
     P_X0,
     P_Y0,
-    UPDATE_M,
     deform_after_law,
 )
 
 if TYPE_CHECKING:
-    from rover_sim.sim.physics import RoverSim
+    import mujoco
+
+    from rover_sim.sim.terramechanics_wr import WheelSoilLaw
+    from terrains import Terrain
 
 SINK_FILTER_S = 0.5
 REPOSE_DEG = 33.0  # slope of a rut's walls: loose sand's angle of repose, 30-35 deg (Mars: Atwood-Genco et al. 2015)
 _RENDER, _LOG = 0, 1  # rows of the dirty-cell boxes: one per consumer
 
 
+class DeformingSim(Protocol):
+    """What the deformable ground reads of the physics that owns it (:class:`rover_sim.sim.physics.RoverSim`): the
+    compiled model and its data, the terrain, the Wong-Reece law and the physics step."""
+
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    terrain: Terrain
+    law: WheelSoilLaw
+
+    @property
+    def timestep_s(self) -> float: ...
+
+
 class DeformableTerrain:
     """The heightfield of ``sim`` made deformable; ``heights_m()`` is the current surface (same grid as the terrain)."""
 
-    def __init__(self, sim: RoverSim, deformable_materials: tuple[bool, ...]) -> None:
+    def __init__(self, sim: DeformingSim, deformable_materials: tuple[bool, ...]) -> None:
         m, t = sim.model, sim.terrain
         self.model = m
         hid = m.hfield("terrain").id
@@ -117,7 +131,7 @@ class DeformableTerrain:
 
     def pop_dirty_cells_for_log(self) -> tuple[int, int, int, int] | None:
         """As :meth:`pop_dirty_cells`, for a second consumer with its own box (the recording's ground tiles,
-        ``rover_sim.mission.rut_log``)."""
+        ``rover_sim.io.rut_log``)."""
         return self._pop(_LOG)
 
     def _pop(self, row: int) -> tuple[int, int, int, int] | None:
@@ -134,7 +148,7 @@ class DeformableTerrain:
         return i, j
 
     # ------------------------------------------------------------------ per physics step
-    def after_law(self, sim: RoverSim, sd: np.ndarray, mats: np.ndarray) -> None:
+    def after_law(self, sim: DeformingSim, sd: np.ndarray, mats: np.ndarray) -> None:
         """Called by RoverSim after the soil law each step (``sd`` its sensor block, ``mats`` the material under
         each wheel): presink for the law, ruts where a wheel has moved (compiled: wr_kernel.deform_after_law)."""
         if not self.enabled:

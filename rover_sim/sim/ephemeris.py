@@ -19,7 +19,7 @@ direction within about 0.2 deg; refraction (the thin, dusty atmosphere: under 0.
 the solar disc's 0.35 deg width are ignored. Converting a clock time (LMST) to LTST would need Mars' equation of
 time (up to about 50 minutes); the scenarios give LTST directly so that step is not needed.
 
-Site frame (as :class:`rover_sim.sim.world.Sun`): +x east, +y north, +z up; azimuth from +x toward +y.
+Site frame (as :class:`rover_sim.sim.assembly.Sun`): +x east, +y north, +z up; azimuth from +x toward +y.
 """
 
 from __future__ import annotations

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import mujoco
@@ -11,11 +10,12 @@ import numpy as np
 
 from nav.types import STEERED, WHEELS
 from rover_sim.errors import PhysicsDiverged
+from rover_sim.sim.assembly import ROCK_GEOM_PREFIX, Sun, build_spec
 from rover_sim.sim.ground_plates import GroundPlates, add_ground_plates
+from rover_sim.sim.ground_truth import GroundTruth
 from rover_sim.sim.soil_kernel import apply_wheel_wrenches, materials_under
 from rover_sim.sim.stream import release_freed_memory
 from rover_sim.sim.terramechanics import WheelSoilLaw, WheelSoilState
-from rover_sim.sim.world import ROCK_GEOM_PREFIX, Sun, build_spec
 from rover_sim.sim.wr_kernel import wr_wrenches
 
 if TYPE_CHECKING:
@@ -38,20 +38,6 @@ _DIVERGENCE_WARNINGS = (
     mujoco.mjtWarning.mjWARN_BADQVEL,
     mujoco.mjtWarning.mjWARN_BADQPOS,
 )
-
-
-@dataclass(frozen=True)
-class GroundTruth:
-    """True rover state at one instant (for logging and evaluation only; never fed to estimators)."""
-
-    t_s: float
-    position_m: np.ndarray  # (3,) world
-    quat_wxyz: np.ndarray  # (4,) world <- rover
-    wheel_slip: np.ndarray  # (6,) WHEELS order, NaN where not rolling
-    wheel_sinkage_m: np.ndarray  # (6,)
-    wheel_load_n: np.ndarray  # (6,)
-    wheel_in_contact: np.ndarray  # (6,) bool
-    tilt_deg: float  # angle between the rover z axis and world up
 
 
 def yaw_on_slope_quat_wxyz(normal: np.ndarray, yaw_rad: float) -> np.ndarray:

@@ -21,7 +21,7 @@ resolved to 10^4-10^5 counts per turn; we quantise to ``2**14`` counts per wheel
 rolling at r = 0.125 m) by truncation as an incremental counter does, and the absolute steering sensors to
 ``2**12`` counts per turn (0.088 deg) by rounding. Both resolutions are assumptions, not flight numbers.
 
-Odometry and attitude errors (``[sensors.odometry]``, :mod:`rover_sim.mission.odometry_spec` for the sizes and
+Odometry and attitude errors (``[sensors.odometry]``, :mod:`rover_sim.scenario.odometry_spec` for the sizes and
 sources): :class:`OdometryErrors` draws them once per run from the scenario seed (its own random stream, so the
 IMU noise is the same draw with or without them). They are applied where they arise: the IMU measures through
 its misaligned, mis-scaled axes (``M = diag(1 + s) R_mis^T``, before bias and noise), the wheel encoders see the

@@ -7,7 +7,7 @@ rover's tile: when the rover enters another tile it assembles the window around 
 the hfield geom to the window's centre. Every world point keeps its height (the tiles are functions of world
 coordinates), so the rover's state needs no change and contacts carry on (see tests/rover_sim/test_stream.py).
 The encoding's elevation range is fixed at compile time (:data:`MIN_ELEVATION_RANGE_M` or more) so every later
-window fits it; only the base moves. Rocks are a pool of ellipsoid geoms (``sim/world.py``) moved and resized
+window fits it; only the base moves. Rocks are a pool of ellipsoid geoms (``sim/assembly.py``) moved and resized
 in place; the world body's bounding-volume tree is then rebuilt (``sim/bvh.py``) so MuJoCo's midphase stays on.
 """
 
@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
+from rover_sim.sim.assembly import ROCK_GEOM_PREFIX, hfield_encoding, park_point_m, rock_slot_geometry
 from rover_sim.sim.bvh import rebuild_body_bvh
-from rover_sim.sim.world import ROCK_GEOM_PREFIX, hfield_encoding, park_point_m, rock_slot_geometry
 from terrains.stream import StreamedSite, WindowTerrain
 
 if TYPE_CHECKING:
@@ -68,7 +68,7 @@ class TerrainStreamer:
         return w
 
     def _fit(self, w: WindowTerrain) -> WindowTerrain:
-        """Keep at most ``rock_slots - 2`` rocks (the tallest): two slots anchor the world bound (sim/world.py)."""
+        """Keep at most ``rock_slots - 2`` rocks (the tallest): two slots anchor the world bound (sim/assembly.py)."""
         room = self.rock_slots - 2
         if len(w.rocks) > room:
             self.rocks_dropped += len(w.rocks) - room

@@ -53,7 +53,6 @@ from functools import lru_cache
 import numpy as np
 
 from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_table
-from rover_sim.sim.terramechanics import pack_inputs  # noqa: F401 - the same input layout as the default law
 from rover_sim.sim.wr_kernel import table_lookup, wr_wheels
 
 __all__ = [
@@ -275,7 +274,8 @@ class WheelSoilLaw:
         ``[found, Fx, Fy, Fz, px, py, pz]`` (the wheel's contact force *on the ground*, zero when not in contact, and
         the contact point), then the wheel-centre velocities (3 per wheel), the rolling directions (3 per wheel)
         and the spin rates (1 per wheel). ``material`` is the soil index per wheel. Build it with
-        :func:`pack_inputs`. The simulator calls :meth:`evaluate_into` on its sensor array instead.
+        :func:`rover_sim.sim.terramechanics.pack_inputs` (the Bekker law's input layout, the same). The simulator
+        calls :meth:`evaluate_into` on its sensor array instead.
         """
         forces = np.zeros((self.n_wheels, 4))
         self.evaluate_into(np.asarray(inputs, dtype=float), np.asarray(material, dtype=np.int64), dt_s, forces)

@@ -10,9 +10,9 @@ import pytest
 
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from rover_sim.render.cameras import camera_world_pose, stereo_rig
+from rover_sim.sim.assembly import Sun
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.sensors import point_mast
-from rover_sim.sim.world import Sun
 from terrains import (
     ExplicitRockSpec,
     RockSpec,

@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rover_sim.mission.autonav import SELF_MASK_HALF_LENGTH_M, SELF_MASK_HALF_WIDTH_M, terrain_points
-from rover_sim.mission.pipeline import TALL_ROCK_M, Mission
-from rover_sim.mission.scenario import scenario_from_dict
+from rover_sim.runtime.acceptance import TALL_ROCK_M
+from rover_sim.runtime.onboard import SELF_MASK_HALF_LENGTH_M, SELF_MASK_HALF_WIDTH_M, terrain_points
+from rover_sim.runtime.runner import Mission
+from rover_sim.scenario.loading import scenario_from_dict
 
 START_X, GOAL_X = -2.5, 2.5
 BLOCK = {"name": "block", "x_m": 0.0, "y_m": 0.15, "length_m": 0.8, "width_m": 0.7, "height_m": 0.40, "yaw_deg": 15}

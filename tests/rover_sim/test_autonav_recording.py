@@ -7,10 +7,10 @@ import copy
 
 import pytest
 
+from rover_sim.apps.autonav import SOL_DETAIL_EVERY
 from rover_sim.io.recorder_protocol import NullRecorder
-from rover_sim.mission.autonav import SOL_DETAIL_EVERY
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.scenario import scenario_from_dict
+from rover_sim.runtime.runner import Mission
+from rover_sim.scenario.loading import scenario_from_dict
 
 pytestmark = pytest.mark.render
 

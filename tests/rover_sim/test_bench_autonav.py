@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from rover_sim.bench.autonav import GOAL_DISTANCE_M, field_scenario
-from rover_sim.mission.pipeline import TALL_ROCK_M
-from rover_sim.mission.scenario import scenario_from_dict
+from rover_sim.runtime.acceptance import TALL_ROCK_M
+from rover_sim.scenario.loading import scenario_from_dict
 from terrains import synthesize
 from terrains.golombek import cumulative_area_fraction
 

@@ -12,8 +12,8 @@ from scipy import stats as sps
 from rover_sim.bench import gate, stats
 from rover_sim.bench.seeds import parse_seeds, seed_set
 from rover_sim.errors import ConfigError
-from rover_sim.mission import acceptance
-from rover_sim.mission.scenario import DistributionSpec
+from rover_sim.runtime import acceptance
+from rover_sim.scenario.criteria import DistributionSpec
 
 
 @pytest.mark.parametrize("n", [5, 8, 12])

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from rover_sim.cli.view import web_url
 from rover_sim.io.blueprint import RunLayout, blueprint_for, view_names
-from rover_sim.mission.run import layout_of
-from rover_sim.mission.scenario import load_scenario
+from rover_sim.runtime.run import layout_of
+from rover_sim.scenario.loading import load_scenario
 
 
 def test_spirit_autonav_opens_on_the_goodness_map_and_hazcams():
@@ -37,9 +37,9 @@ def test_web_url_points_the_viewer_at_the_local_proxy():
 def test_a_run_without_vo_records_no_vo_series(tmp_path):
     from test_runner import TINY  # pytest puts this folder on sys.path
 
-    from rover_sim.io.recording import entity_row_counts
-    from rover_sim.mission.run import run_scenario
-    from rover_sim.mission.scenario import scenario_from_dict
+    from rover_sim.io.rrd import entity_row_counts
+    from rover_sim.runtime.run import run_scenario
+    from rover_sim.scenario.loading import scenario_from_dict
 
     sc = scenario_from_dict(TINY, overrides=["nav.vo=false", "commands.0.distance_m=0.3"])
     run_scenario(sc, tmp_path, record=True)

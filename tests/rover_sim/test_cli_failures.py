@@ -22,8 +22,8 @@ from rover_sim.cli.outdir import OutDirRefused, prepare_out_dir
 from rover_sim.cli.status import ExitStatus, of_reason, worst
 from rover_sim.errors import ConfigError
 from rover_sim.io.junit import Case, write_junit
-from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import scenario_from_dict
+from rover_sim.runtime.run import run_scenario
+from rover_sim.scenario.loading import scenario_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 RERUN = Path(sys.executable).with_name("rerun")

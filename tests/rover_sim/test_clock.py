@@ -1,6 +1,6 @@
 import pytest
 
-from rover_sim.mission.clock import SECONDS_PER_SOL, MissionClock
+from rover_sim.world.clock import SECONDS_PER_SOL, MissionClock
 
 
 def test_clock_accumulates_by_activity_and_wraps_the_time_of_day():

@@ -14,12 +14,10 @@ import pytest
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.dimes import estimate_velocity
 from nav.geometry import so3_log
-from rover_sim.mission.descent import (
+from rover_sim.apps.descent import (
     FEATURELESS_TERRAIN,
     IMAGE_ALTITUDES_M,
-    DescentCameraConfig,
     DescentConditions,
-    DescentRenderer,
     DescentTerrainSpec,
     DescentTrajectory,
     DescentWorld,
@@ -31,7 +29,8 @@ from rover_sim.mission.descent import (
     simulate_descent,
     with_wind,
 )
-from rover_sim.sim.world import Sun
+from rover_sim.apps.descent_scene import DescentCameraConfig, DescentRenderer
+from rover_sim.sim.assembly import Sun
 from terrains import Terrain
 
 FLAT_PLAIN = Terrain.from_heights(np.zeros((801, 801)), 4.0)  # 3.2 km at 4 m, for sensor and geometry tests
@@ -165,7 +164,7 @@ def test_rendered_marker_lands_where_the_camera_model_projects_it(marker_rendere
 
 @pytest.mark.render
 def test_rendering_is_deterministic(marker_renderer):
-    from rover_sim.render.renderer import ImageNoise
+    from rover_sim.render.config import ImageNoise
 
     T = _pose(DescentTrajectory(DescentConditions.sample(1)).R_world_cam(0.0), np.array([0.0, 0.0, 2000.0]))
     sun = Sun(azimuth_deg=30.0, elevation_deg=50.0, shadows=False)

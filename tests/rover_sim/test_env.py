@@ -176,8 +176,8 @@ def test_flight_images_are_the_missions_rectified_pairs():
     rectification through the calibrated models: World + Onboard.rectified) for the same world and noise seed."""
     from types import SimpleNamespace
 
-    from rover_sim.mission.onboard import Onboard
-    from rover_sim.mission.world import World
+    from rover_sim.runtime.onboard import Onboard
+    from rover_sim.world.world import World
 
     # classic regolith: the env paints the world's soil as before (the texture is not the sensor chain)
     over = (*SMALL["overrides"], 'appearance.regolith="classic"', "nav.resolution_px=64")

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from rover_sim.errors import ConfigError
-from rover_sim.mission.clock import SECONDS_PER_SOL
-from rover_sim.mission.scenario import scenario_from_dict
-from rover_sim.mission.world import World
+from rover_sim.scenario.loading import scenario_from_dict
 from rover_sim.sim.ephemeris import solar_declination_deg, sun_azimuth_elevation_deg
+from rover_sim.world.clock import SECONDS_PER_SOL
+from rover_sim.world.world import World
 
 MARS_HOUR_S = SECONDS_PER_SOL / 24.0
 

@@ -14,8 +14,8 @@ from known_bad_vos import KNOWN_BAD
 
 from rover_sim.bench.seeds import Seeds
 from rover_sim.bench.suite import bench_suite
-from rover_sim.mission.scenario import plugin_overrides
 from rover_sim.resources import suite_baseline_path
+from rover_sim.scenario.loading import plugin_overrides
 
 PERTURBATIONS = [(1e-6, 11), (1e-6, 12), (1e-9, 13)]  # EPS (m and rad), perturbation seed
 

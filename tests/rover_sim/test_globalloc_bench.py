@@ -12,8 +12,8 @@ from rover_sim.bench.globalloc import Stop, draw_prior, run_stop, summarise
 from rover_sim.bench.globalloc_sites import TERRAINS, stops_xy_yaw
 from rover_sim.cli.orbital import parse_seeds
 from rover_sim.errors import ConfigError, PluginError
-from rover_sim.mission.acceptance import GLOBALLOC, judge_globalloc
-from rover_sim.mission.plugins import make_global_localizer
+from rover_sim.runtime.acceptance import GLOBALLOC, judge_globalloc
+from rover_sim.runtime.plugins import make_global_localizer
 
 
 def tiny_map() -> OrbitalMap:
@@ -67,7 +67,7 @@ def test_a_plugin_answering_outside_the_protocol_is_named():
         def localize(self, *a):  # noqa: ANN002, ANN201
             return "somewhere"
 
-    from rover_sim.mission.plugins import GuardedGlobalLocalizer
+    from rover_sim.runtime.plugins import GuardedGlobalLocalizer
 
     with pytest.raises(PluginError, match="status"):
         run_stop(GuardedGlobalLocalizer(Bad(), "bad"), stops("rocky_plains")[0], tiny_map())

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rover_sim.mission.sensors_spec import SensorsSpec
 from rover_sim.render.imaging import (
     DN12_MAX,
     ImageFormation,
@@ -13,6 +12,7 @@ from rover_sim.render.imaging import (
     compand_8bit,
     exposure_scale,
 )
+from rover_sim.scenario.sensors_spec import SensorsSpec
 
 CLEAN = {"prnu_rel": 0.0, "dsnu_e": 0.0, "vignetting_corner_rel": 0.0, "dust_spots": 0, "gain_mismatch_rel": 0.0}
 

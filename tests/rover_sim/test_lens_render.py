@@ -13,11 +13,11 @@ from scipy.spatial.transform import Rotation
 from nav.camera import transform_points
 from nav.epipolar import EpipolarCheck
 from nav.rectify import StereoCalibration, epipolar_row_error_px, rectification
-from rover_sim.mission.calibration import MastEncoders, RunCalibration, build_true_lens, render_rectified
-from rover_sim.mission.lens_spec import FLIGHT_DEFAULTS, LensErrorSpec
-from rover_sim.mission.sensors_spec import SensorsSpec
 from rover_sim.render.cameras import camera_model
 from rover_sim.render.renderer import StereoRenderer
+from rover_sim.scenario.lens_spec import FLIGHT_DEFAULTS, LensErrorSpec
+from rover_sim.scenario.sensors_spec import SensorsSpec
+from rover_sim.world.calibration import MastEncoders, RunCalibration, build_true_lens, render_rectified
 from tests.rover_sim.test_render import bright_blob_centroid, world_T_rover
 
 pytestmark = pytest.mark.render
@@ -298,11 +298,11 @@ FIELD = {
 def test_flight_world_points_the_mast_with_encoder_error_and_keeps_the_commanded_rig() -> None:
     """The true mast stops off the command by the drawn encoder error; the onboard rig (rectified, from the
     calibrated models) is built at the commanded angles; observations carry raw pairs that Onboard rectifies."""
-    from rover_sim.mission.calibration import cameras_at_pointing
-    from rover_sim.mission.onboard import Onboard
-    from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
-    from rover_sim.mission.scenario import scenario_from_dict
-    from rover_sim.mission.world import World
+    from rover_sim.runtime.onboard import Onboard
+    from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
+    from rover_sim.scenario.loading import scenario_from_dict
+    from rover_sim.world.calibration import cameras_at_pointing
+    from rover_sim.world.world import World
 
     world = World(scenario_from_dict(FIELD))
     try:
@@ -373,8 +373,8 @@ def test_oversampled_true_lens_integrates_each_raw_pixel_without_shifting_it() -
 
     pins = [PinholeCamera.from_fov(f"navcam_{s}", 64, 64, 45.0) for s in ("left", "right")]
     models = {p.name: CahvorCamera.from_pinhole(p, r=(0.0, -0.01, 0.003)) for p in pins}
-    point = TrueLens(models, LensErrorSpec(**{**FLIGHT_DEFAULTS, "render_oversample": 1.0}))
-    area = TrueLens(models, LensErrorSpec(**{**FLIGHT_DEFAULTS, "render_oversample": 2.0}))
+    point = TrueLens(models, 1.0, LensErrorSpec().hazcam_max_off_axis_deg)
+    area = TrueLens(models, 2.0, LensErrorSpec().hazcam_max_off_axis_deg)
     assert point.area_sigma_px == 0.0 and area.area_sigma_px == pytest.approx(2.0 / np.sqrt(12.0))
     px = area.views["navcam"].px
     assert px >= 2 * 64

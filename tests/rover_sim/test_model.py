@@ -8,9 +8,9 @@ import pytest
 
 import rover_sim  # noqa: F401
 from rover_sim.errors import PhysicsDiverged
+from rover_sim.sim.assembly import ROVER_XML, SCENE_XML
 from rover_sim.sim.drive import Straight, execute
 from rover_sim.sim.physics import RoverSim
-from rover_sim.sim.world import ROVER_XML, SCENE_XML
 from terrains import (
     ExplicitRockSpec,
     MaterialSpec,

@@ -10,21 +10,21 @@ import pytest
 
 from nav.trajectory import Pose, Trajectory
 from nav.types import EncoderSample, ImuSample
-from rover_sim.mission.evaluator import (
+from rover_sim.runtime.evaluator import (
     CHI2_3DOF_MEDIAN,
     VoStepError,
     rms_position_error_m,
     segment_errors_pct,
     vo_covariance_nees,
 )
-from rover_sim.mission.observation import Observation
-from rover_sim.mission.odometry_spec import FLIGHT_DEFAULTS, OdometryErrorSpec
-from rover_sim.mission.onboard import Onboard
-from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import scenario_from_dict
-from rover_sim.mission.sensors_spec import SensorsSpec
-from rover_sim.mission.world import with_heading_error
+from rover_sim.runtime.onboard import Onboard
+from rover_sim.runtime.run import run_scenario
+from rover_sim.scenario.loading import scenario_from_dict
+from rover_sim.scenario.odometry_spec import FLIGHT_DEFAULTS, OdometryErrorSpec
+from rover_sim.scenario.sensors_spec import SensorsSpec
 from rover_sim.sim.sensors import EncoderModel, ImuModel, OdometryErrors
+from rover_sim.world.observation import Observation
+from rover_sim.world.world import with_heading_error
 
 # flat, firm, benign ground; VO off: the dead-reckoning acceptance of issue #16 on a short drive
 FLAT = {
@@ -187,9 +187,9 @@ def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_
     regression gate judges only the baseline profile's run, --update-baseline stores it with its perturbed spread."""
     import json
 
+    from rover_sim.apps.sweep_jobs import JobResult
     from rover_sim.bench import seeded, suite
     from rover_sim.bench.seeds import Seeds
-    from rover_sim.mission.sweep import JobResult
 
     seen = []
 

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from rover_sim.mission.scenario import load_scenario, scenario_from_dict
 from rover_sim.orbital.files import read_products, write_products
 from rover_sim.orbital.products import make_products, site_boxes
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
 
 ROCK_XY = (2.0, -3.0)
 

@@ -9,9 +9,9 @@ import pytest
 from test_runner import TINY  # noqa: E402 (pytest puts this folder on sys.path)
 
 from rover_sim.errors import PluginError
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.plugins import make_stereo, make_vo
-from rover_sim.mission.scenario import load_scenario, scenario_from_dict
+from rover_sim.runtime.plugins import make_stereo, make_vo
+from rover_sim.runtime.runner import Mission
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
 
 USER_MODULE = '''
 import numpy as np
@@ -164,7 +164,7 @@ def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsy
 def test_installed_packages_register_plugins_by_entry_point(user_module, monkeypatch):
     from importlib.metadata import EntryPoint
 
-    from rover_sim.mission import plugins
+    from rover_sim.runtime import plugins
 
     ep = EntryPoint(name="refusing_vo", value=f"{user_module}:RefusingVO", group=plugins.ENTRY_POINT_GROUP)
     monkeypatch.setattr(plugins, "entry_points", lambda group: [ep] if group == plugins.ENTRY_POINT_GROUP else [])

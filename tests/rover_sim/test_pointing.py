@@ -1,10 +1,10 @@
-"""Texture-seeking mast pointing keeps the mast near its commanded pointing (rover_sim/mission/pointing.py)."""
+"""Texture-seeking mast pointing keeps the mast near its commanded pointing (rover_sim/runtime/pointing.py)."""
 
 from __future__ import annotations
 
 from types import SimpleNamespace
 
-from rover_sim.mission.pointing import (
+from rover_sim.runtime.pointing import (
     POOR_VIEW_FEATURES,
     PointingCandidate,
     choose_pointing,

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from nav.trajectory import Pose, Trajectory
-from rover_sim.mission.evaluator import final_slip, window_slips
-from rover_sim.mission.pose_series import PoseSeries
+from rover_sim.runtime.evaluator import final_slip, window_slips
+from rover_sim.runtime.pose_series import PoseSeries
 
 
 def _poses(n: int, seed: int = 0) -> list[Pose]:

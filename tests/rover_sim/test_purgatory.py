@@ -11,10 +11,11 @@ import pytest
 
 from nav.trajectory import Pose
 from rover_sim.errors import ConfigError
-from rover_sim.mission.acceptance import judge
-from rover_sim.mission.evaluator import Metrics, final_slip, wheel_sinkage_m
-from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import PassSpec, load_scenario
+from rover_sim.runtime.acceptance import judge
+from rover_sim.runtime.evaluator import Metrics, final_slip, wheel_sinkage_m
+from rover_sim.runtime.run import run_scenario
+from rover_sim.scenario.criteria import PassSpec
+from rover_sim.scenario.loading import load_scenario
 from rover_sim.sim.drive import Straight, execute
 from rover_sim.sim.physics import WHEEL_RADIUS_M, WHEEL_WIDTH_M, RoverSim
 from rover_sim.sim.terramechanics_wr import DRIFT, SAND

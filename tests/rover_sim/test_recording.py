@@ -11,13 +11,10 @@ from rerun.chunk import RrdReader
 
 from nav.camera import PinholeCamera, StereoRig
 from nav.geometry import R_to_quat_wxyz, rpy_to_R, se3
-from rover_sim.io.recording import (
-    NullRecorder,
-    Recorder,
-    RerunRecorder,
-    entity_row_counts,
-    terrain_mesh_step,
-)
+from rover_sim.io.recorder_protocol import NullRecorder, Recorder
+from rover_sim.io.recording import RerunRecorder
+from rover_sim.io.recording_helpers import terrain_mesh_step
+from rover_sim.io.rrd import entity_row_counts
 from terrains import Terrain, TerrainRecipe, synthesize
 
 N_TICKS = 10

@@ -16,16 +16,9 @@ import rover_sim  # noqa: F401
 from nav.camera import PinholeCamera, transform_points
 from rover_sim.errors import RenderingUnavailable
 from rover_sim.render.cameras import camera_world_pose
-from rover_sim.render.renderer import (
-    DN12_MAX,
-    ImageNoise,
-    RenderConfig,
-    StereoRenderer,
-    bin_average,
-    check_gl,
-    quantise,
-    terrain_texture,
-)
+from rover_sim.render.config import ImageNoise, RenderConfig
+from rover_sim.render.gl import check_gl
+from rover_sim.render.renderer import DN12_MAX, StereoRenderer, bin_average, quantise, terrain_texture
 from terrains import TerrainRecipe, rock_albedo, synthesize
 
 pytestmark = pytest.mark.render

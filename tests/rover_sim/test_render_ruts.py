@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from rover_sim.bench.mobility import slope_terrain, wr_sim
-from rover_sim.render.renderer import RenderConfig, RenderWorld
+from rover_sim.render.config import RenderConfig
+from rover_sim.render.render_world import RenderWorld
 from rover_sim.render.ruts import quat_to_matrix
 from rover_sim.sim.drive import Straight, execute
 

@@ -7,10 +7,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.scenario import scenario_from_dict
 from rover_sim.render.renderer import StereoRenderer
 from rover_sim.render.tiles import tile_meshes, write_tile_meshes
+from rover_sim.runtime.runner import Mission
+from rover_sim.scenario.loading import scenario_from_dict
 
 pytestmark = pytest.mark.render
 

@@ -1,4 +1,4 @@
-"""Rock sites in the simulator (rover_sim.mission.survey): the scenario, the evaluation, a one-site panorama."""
+"""Rock sites in the simulator (rover_sim.apps.survey): the scenario, the evaluation, a one-site panorama."""
 
 from __future__ import annotations
 
@@ -10,15 +10,10 @@ import pytest
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
 from nav.rocks import ExtractedRock, LocalPlane, PanoramaStereoParams, Pose4, RockModel, RockPeak, SiteMatch
 from nav.trajectory import Pose
-from rover_sim.mission.scenario import GotoCmd, load_scenario, scenario_from_dict
-from rover_sim.mission.survey import (
-    VO_SYSTEMATIC_SIGMA_FRAC,
-    RockSiteSurvey,
-    SiteSurvey,
-    SurveyConfig,
-    evaluate_extraction,
-    evaluate_match,
-)
+from rover_sim.apps.survey import VO_SYSTEMATIC_SIGMA_FRAC, RockSiteSurvey, SiteSurvey, SurveyConfig
+from rover_sim.apps.survey_eval import evaluate_extraction, evaluate_match
+from rover_sim.scenario.commands import GotoCmd
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
 from terrains import ExplicitRockSpec, RockSpec, TerrainRecipe, synthesize
 
 
@@ -198,8 +193,8 @@ def test_flight_panorama_pairs_are_rectified_with_the_calibrated_models() -> Non
     rectified on board with the *calibrated* models at the *commanded* mast pointing (the rig stereo triangulates
     with is the onboard one, not the true cameras); ideal profile: the pinhole pair and its exact rig."""
     from nav.rectify import rectification
-    from rover_sim.mission.calibration import onboard_stereo_models
     from rover_sim.render.lens import TrueLens
+    from rover_sim.world.calibration import onboard_stereo_models
 
     config = SurveyConfig(resolution_px=256)
     d = small_site_scenario().model_dump(mode="json")

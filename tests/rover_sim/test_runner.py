@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from nav.trajectory import read_tum
-from rover_sim.io.recording import entity_row_counts
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import scenario_from_dict
+from rover_sim.io.rrd import entity_row_counts
+from rover_sim.runtime.run import run_scenario
+from rover_sim.runtime.runner import Mission
+from rover_sim.scenario.loading import scenario_from_dict
 
 TINY = {
     "name": "tiny",

@@ -1,4 +1,4 @@
-"""The recording's ground in deformable runs (rover_sim/mission/rut_log.py): tiles re-logged where ruts change them."""
+"""The recording's ground in deformable runs (rover_sim/io/rut_log.py): tiles re-logged where ruts change them."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from rover_sim.bench.mobility import slope_terrain, wr_sim
 from rover_sim.io.recorder_protocol import NullRecorder
-from rover_sim.mission.rut_log import RutLog
+from rover_sim.io.rut_log import RutLog
 from rover_sim.sim.drive import Straight, execute
 
 
@@ -89,9 +89,9 @@ class MissionSpy(TileSpy):
 
 def _mission_tiles(deformable: bool) -> MissionSpy:
     """purgatory_ripple's first 0.6 m (its pass bounds dropped: they need deformation)."""
-    from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.scenario import scenario_from_dict
     from rover_sim.resources import scenarios_dir
+    from rover_sim.runtime.runner import Mission
+    from rover_sim.scenario.loading import scenario_from_dict
 
     data = tomllib.loads((scenarios_dir() / "purgatory_ripple.toml").read_text())
     data["physics"]["deformable"] = deformable

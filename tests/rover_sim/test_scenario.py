@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rover_sim.errors import ConfigError
-from rover_sim.mission.scenario import catalogue, load_scenario, parse_override, scenario_from_dict
+from rover_sim.scenario.loading import catalogue, load_scenario, parse_override, scenario_from_dict
 
 MINIMAL = {"name": "t", "commands": [{"type": "drive", "distance_m": 1.0}]}
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from nav.vo.shadow import predict_shadow, vo_feature_mask
-from rover_sim.mission.rover_shape import rover_shape
-from rover_sim.mission.scenario import scenario_from_dict
-from rover_sim.mission.world import World
-from rover_sim.sim.world import Sun
+from rover_sim.scenario.loading import scenario_from_dict
+from rover_sim.sim.assembly import Sun
+from rover_sim.world.rover_shape import rover_shape
+from rover_sim.world.world import World
 
 FIELD = {
     "name": "shadow_probe",

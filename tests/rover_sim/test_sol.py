@@ -6,17 +6,18 @@ import numpy as np
 import pytest
 
 from rover_sim.errors import ConfigError
-from rover_sim.mission.clock import (
+from rover_sim.runtime.runner import Mission
+from rover_sim.runtime.sol import BudgetSpent, SolBudget
+from rover_sim.scenario.commands import SolSpec
+from rover_sim.scenario.loading import load_scenario, scenario_from_dict
+from rover_sim.sim.assembly import Sun
+from rover_sim.world.clock import (
     AUTONAV_CYCLE_S,
     IMAGE_PAIR_ACQUIRE_S,
     SECONDS_PER_SOL,
     VO_STEP_COMPUTE_S,
     MissionClock,
 )
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.scenario import SolSpec, load_scenario, scenario_from_dict
-from rover_sim.mission.sol import BudgetSpent, SolBudget
-from rover_sim.sim.world import Sun
 
 
 def test_distance_splits_by_mode_on_the_worlds_clock() -> None:

@@ -16,13 +16,9 @@ from pathlib import Path
 import pytest
 
 import rover_sim  # noqa: F401  (first: sets MUJOCO_GL=egl before anything imports mujoco)
-from rover_sim.errors import ConfigError
-from rover_sim.mission import sweep
-from rover_sim.mission.sweep import (
+from rover_sim.apps import sweep
+from rover_sim.apps.sweep import (
     METRIC_COLUMNS,
-    DaskUnavailable,
-    Job,
-    JobResult,
     load_completed,
     parse_grid,
     plan_jobs,
@@ -30,6 +26,8 @@ from rover_sim.mission.sweep import (
     result_columns,
     run_sweep,
 )
+from rover_sim.apps.sweep_jobs import Job, JobResult
+from rover_sim.errors import ConfigError, DaskUnavailable, SchedulerUnreachable
 
 TINY_TOML = """
 name = "tiny_sweep"
@@ -81,7 +79,7 @@ def fake_job(job: Job, jobs_dir: str) -> JobResult:
 
 def fail_on_seed_1(job: Job, jobs_dir: str) -> JobResult:
     if job.seed == 1:
-        from rover_sim.mission.sweep import run_job
+        from rover_sim.apps.sweep import run_job
 
         bad = Job(job.job_id, job.params, job.seed, job.scenario | {"commands": []})  # fails validation in the worker
         return run_job(bad, jobs_dir)
@@ -185,7 +183,7 @@ def test_missing_dask_says_how_to_install_it(tiny, tmp_path, monkeypatch) -> Non
 def test_unreachable_scheduler_is_a_clear_error(tiny, tmp_path, monkeypatch) -> None:
     pytest.importorskip("distributed", reason="the Dask backend needs the rover-sim[dask] extra")
     monkeypatch.setattr(sweep, "DASK_CONNECT_TIMEOUT_S", 0.5)
-    with pytest.raises(sweep.SchedulerUnreachable, match="dask scheduler"):
+    with pytest.raises(SchedulerUnreachable, match="dask scheduler"):
         run_sweep(tiny, [GRID[0]], 1, tmp_path, scheduler="tcp://127.0.0.1:9", job_fn=fake_job)
 
 

@@ -12,11 +12,12 @@ import pytest
 
 from rover_sim.bench.mobility import measure_slip, parked_drift_m, slope_terrain
 from rover_sim.errors import ConfigError
-from rover_sim.mission.scenario import load_scenario
+from rover_sim.scenario.loading import load_scenario
 from rover_sim.sim import terramechanics, terramechanics_wr
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.soil_tables import mobilisation
-from rover_sim.sim.terramechanics_wr import BEDROCK, DRIFT, MIXED, SAND, WheelSoilLaw, pack_inputs
+from rover_sim.sim.terramechanics import pack_inputs
+from rover_sim.sim.terramechanics_wr import BEDROCK, DRIFT, MIXED, SAND, WheelSoilLaw
 
 W_N = 108.0  # one sixth of MER's weight on Mars
 DT = 0.005

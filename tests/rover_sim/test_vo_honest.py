@@ -8,9 +8,9 @@ import textwrap
 import pytest
 
 from rover_sim.bench.seeds import Seeds
-from rover_sim.mission.evaluator import false_positive_limit_m
-from rover_sim.mission.run import run_scenario
-from rover_sim.mission.scenario import plugin_overrides, scenario_from_dict
+from rover_sim.runtime.evaluator import false_positive_limit_m
+from rover_sim.runtime.run import run_scenario
+from rover_sim.scenario.loading import plugin_overrides, scenario_from_dict
 
 STUBS = '''
 import numpy as np

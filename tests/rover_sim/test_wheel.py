@@ -127,7 +127,7 @@ def test_wheel_ships_the_data_and_lists_the_catalogue(installed):
     cwd = installed["tmp"]  # outside the checkout: the source tree is not importable from here
     probe = (
         "import mujoco, rover_sim, rover_sim.resources as r\n"
-        "from rover_sim.sim.world import SCENE_XML\n"
+        "from rover_sim.sim.assembly import SCENE_XML\n"
         "mujoco.MjSpec.from_file(str(SCENE_XML)).compile()\n"  # scene.xml includes rover.xml by relative path
         "print(rover_sim.__file__, r.source_checkout(), r.scenarios_dir(), r.suite_baseline_path().is_file())\n"
     )

@@ -25,7 +25,9 @@ import numpy as np
 import pytest
 from wong_reece_reference import lateral_force, wheel
 
-from rover_sim.sim.terramechanics_wr import SAND, WheelParams, WheelSoilLaw, pack_inputs
+from rover_sim.sim.soil_tables import WheelParams
+from rover_sim.sim.terramechanics import pack_inputs
+from rover_sim.sim.terramechanics_wr import SAND, WheelSoilLaw
 
 W_N = 108.0
 R_M, B_M = 0.125, 0.16

@@ -1,7 +1,7 @@
 """Dataset export: a run's stereo pairs, IMU, wheel encoders, ground truth and onboard estimates as a KITTI, EuRoC
 or ROS 2 (MCAP) dataset, for running external VO/VIO/SLAM on simulated Mars drives.
 
-A :class:`DatasetSink` subscribes to a :class:`~rover_sim.mission.pipeline.Mission`'s public hooks and hands
+A :class:`DatasetSink` subscribes to a :class:`~rover_sim.runtime.runner.Mission`'s public hooks and hands
 each stream to one or more :class:`~rover_sim.io.export.base.DatasetWriter` s as it arrives (images go to disk at
 once, nothing accumulates in memory); :func:`export_scenario` runs a scenario with a sink attached::
 
@@ -37,10 +37,10 @@ from rover_sim.errors import RoverSimError
 from rover_sim.io.export.base import DatasetWriter, ExportMeta, Frame, Stream
 
 if TYPE_CHECKING:
-    from rover_sim.mission.observation import Observation
-    from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.scenario import Scenario
     from rover_sim.render.renderer import StereoFrame, StereoRenderer
+    from rover_sim.runtime.runner import Mission
+    from rover_sim.scenario.schema import Scenario
+    from rover_sim.world.observation import Observation
 
 __all__ = ["CAMERAS", "FORMATS", "DatasetSink", "DatasetWriter", "ExportOptionError", "ExportSummary", "Frame",
            "check_options", "export_scenario", "make_writer"]  # fmt: skip
@@ -222,9 +222,10 @@ def export_scenario(
 ) -> ExportSummary:
     """Run ``scenario`` with a :class:`DatasetSink` writing ``formats`` into ``out`` (which must be empty or new);
     the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``."""
-    from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.run import write_outputs
-    from rover_sim.mission.scenario import Scenario, load_scenario
+    from rover_sim.runtime.run import write_outputs
+    from rover_sim.runtime.runner import Mission
+    from rover_sim.scenario.loading import load_scenario
+    from rover_sim.scenario.schema import Scenario
 
     for fmt in formats:
         check_options(fmt, camera, rate_hz)

@@ -20,15 +20,16 @@ from nav.camera import StereoRig
 from nav.geometry import R_to_quat_wxyz
 from nav.rectify import StereoCalibration
 from nav.trajectory import Pose
-from rover_sim.mission.calibration import MastEncoders, RunCalibration, build_true_lens, onboard_stereo_models
-from rover_sim.mission.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
-from rover_sim.mission.observation import Observation, StereoImages
-from rover_sim.mission.scenario import Scenario
-from rover_sim.render.renderer import ImageNoise, RenderConfig, StereoFrame, StereoRenderer, terrain_texture
+from rover_sim.render.config import ImageNoise, RenderConfig
+from rover_sim.render.renderer import StereoFrame, StereoRenderer, terrain_texture
+from rover_sim.scenario.schema import Scenario
+from rover_sim.sim.assembly import Sun
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.sensors import OdometryErrors, SensorSuite
 from rover_sim.sim.stream import TerrainStreamer
-from rover_sim.sim.world import Sun
+from rover_sim.world.calibration import MastEncoders, RunCalibration, build_true_lens, onboard_stereo_models
+from rover_sim.world.clock import IMAGE_PAIR_ACQUIRE_S, Activity, MissionClock
+from rover_sim.world.observation import Observation, StereoImages
 from terrains import Terrain, synthesize, texture_rgb_u8
 
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB
@@ -185,7 +186,7 @@ class World:
         pointing, fixed until :meth:`calibrate` is called again after a repointing.
 
         With ``[sensors.lens]`` errors: the rig is the *rectified* rig of the calibrated (erroneous) models at the
-        commanded mast angles (:mod:`rover_sim.mission.calibration`, :mod:`nav.rectify`), and the models travel
+        commanded mast angles (:mod:`rover_sim.world.calibration`, :mod:`nav.rectify`), and the models travel
         with each pair for the onboard rectification."""
         spec = self.scenario.sensors.lens
         if self.calibration is None and not spec.has_mast_error:  # ideal: the exact rig at the current state

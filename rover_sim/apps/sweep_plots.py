@@ -1,6 +1,6 @@
-"""The plots of a Monte-Carlo sweep (:func:`rover_sim.mission.sweep.run_sweep`): ``DIR/plots/*.png``.
+"""The plots of a Monte-Carlo sweep (:func:`rover_sim.apps.sweep.run_sweep`): ``DIR/plots/*.png``.
 
-Like :mod:`rover_sim.mission.sweep`, this module imports only the standard library at the top (numpy and
+Like :mod:`rover_sim.apps.sweep`, this module imports only the standard library at the top (numpy and
 matplotlib are imported where a plot is drawn).
 """
 
@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from rover_sim.mission.sweep import GridAxis, Job, JobResult
+    from rover_sim.apps.sweep_jobs import GridAxis, Job, JobResult
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ latter.
   detail averages out at 1.6 m texels; the material patches remain) plus a multi-scale albedo mottling of
   ``mottle_contrast`` (dust and sand sheets at 15-250 m), one 2048 px texture (MuJoCo/GL side limit: keep
   ``texture_px`` <= 8192) draped over the heightfield.
-* **Camera** (:class:`DescentCameraConfig`; the scene and renderer are in :mod:`rover_sim.mission.descent_scene`):
+* **Camera** (:class:`DescentCameraConfig`; the scene and renderer are in :mod:`rover_sim.apps.descent_scene`):
   the MER descent imager had a 45 deg field of view and a 1024x1024 detector; DIMES used the images binned to
   256x256. We render 256x256 directly by default (GL mipmapping averages the texture; ``binning=4`` renders 1024x1024
   and averages 4x4 blocks like the detector, 4-5x slower), convert to luminance and add 12-bit read noise and
@@ -51,18 +51,9 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.dimes import DescentImage
 from nav.geometry import so3_exp
-from rover_sim.mission.descent_scene import (  # noqa: F401 - the scene's names re-exported from here
-    CLIP_EXTENT_M,
-    SKY_AMBIENT,
-    SUN_DIFFUSE,
-    ZFAR,
-    ZNEAR,
-    DescentCameraConfig,
-    DescentRenderer,
-    descent_model,
-)
-from rover_sim.render.renderer import ImageNoise
-from rover_sim.sim.world import Sun
+from rover_sim.apps.descent_scene import DescentCameraConfig, DescentRenderer
+from rover_sim.render.config import ImageNoise
+from rover_sim.sim.assembly import Sun
 from terrains import (
     CraterSpec,
     MaterialSpec,

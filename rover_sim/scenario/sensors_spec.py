@@ -15,9 +15,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from rover_sim.mission.lens_spec import LensErrorSpec
-from rover_sim.mission.odometry_spec import OdometryErrorSpec
 from rover_sim.render.imaging import ImagingSpec
+from rover_sim.scenario.lens_spec import LensErrorSpec
+from rover_sim.scenario.odometry_spec import OdometryErrorSpec
 
 Profile = Literal["flight", "ideal"]
 DEFAULT_PROFILE: Profile = "flight"

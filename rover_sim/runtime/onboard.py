@@ -1,6 +1,6 @@
 """The onboard stack: what flight software computed from sensor data alone (kiss-icp ``register_frame`` style).
 
-Every entry point takes an :class:`~rover_sim.mission.observation.Observation` and refuses anything else, so the
+Every entry point takes an :class:`~rover_sim.world.observation.Observation` and refuses anything else, so the
 honesty rule is a type, not a convention. Nothing here imports the simulator, the renderer or the evaluator.
 
 - :meth:`Onboard.observe`: each encoder reading with the IMU samples up to it -> two dead reckoners (one pure
@@ -38,7 +38,7 @@ from nav.types import ImuSample, RoverGeometry
 from nav.vo.params import VoParams
 from nav.vo.shadow import RoverShape, predict_shadow, vo_feature_mask
 from nav.vo.texture import points_in_view, trackable_points, view_overlap
-from rover_sim.mission.observation import Observation, StereoImages, require_observation
+from rover_sim.world.observation import Observation, StereoImages, require_observation
 
 # Hazcam look-ahead on MER: 3-4 m useful. At 256^2 (10 cm baseline) the disparity at 3.5 m is ~2 px and
 # elevation errors there reach 10-20 cm, as big as the steps GESTALT must see; farther points only add false rocks.

@@ -1,6 +1,6 @@
 """The DIMES descent scene: the MuJoCo model (terrain heightfield, texture, sun, descent camera) and its renderer.
 
-:class:`DescentCameraConfig` is the MER descent imager (see :mod:`rover_sim.mission.descent` for the scenario).
+:class:`DescentCameraConfig` is the MER descent imager (see :mod:`rover_sim.apps.descent` for the scenario).
 MuJoCo scales the clip planes by ``statistic/extent``: extent 1000 m with ``znear=0.01``, ``zfar=10`` gives 10 m
 to 10 km.
 
@@ -18,8 +18,10 @@ import numpy as np
 from nav.camera import PinholeCamera
 from nav.geometry import R_to_quat_wxyz
 from rover_sim.render.cameras import MJ_TO_CV
-from rover_sim.render.renderer import LUMA_WEIGHTS, ImageNoise, bin_average, check_gl, quantise
-from rover_sim.sim.world import Sun, hfield_encoding
+from rover_sim.render.config import ImageNoise
+from rover_sim.render.gl import check_gl
+from rover_sim.render.renderer import LUMA_WEIGHTS, bin_average, quantise
+from rover_sim.sim.assembly import Sun, hfield_encoding
 
 if TYPE_CHECKING:
     from terrains import Terrain
@@ -34,7 +36,7 @@ SKY_AMBIENT = 0.45  # uniform ambient light standing in for the dusty sky
 class DescentCameraConfig:
     """MER descent imager: 45 deg field of view, 1024x1024 12-bit; DIMES used 256x256.
 
-    See :mod:`rover_sim.mission.descent` (module docstring).
+    See :mod:`rover_sim.apps.descent` (module docstring).
     """
 
     resolution_px: int = 256

@@ -1,7 +1,7 @@
 """What the onboard stack is allowed to see: the :class:`Observation` type.
 
 The honesty rule (estimators never read ground truth) is enforced here by type: the onboard entry points
-(:mod:`rover_sim.mission.onboard`) accept exactly :class:`Observation` and refuse anything else, subclasses included,
+(:mod:`rover_sim.runtime.onboard`) accept exactly :class:`Observation` and refuse anything else, subclasses included,
 and an Observation holds only what flight software had on Mars:
 
 - stereo pairs as the cameras delivered them, each with the *calibrated* camera models flight software holds
@@ -10,7 +10,7 @@ and an Observation holds only what flight software had on Mars:
   are **raw** (distorted through the true lenses, unrectified), ``calibration`` holds the calibrated left/right
   CAHVOR or fisheye models (:mod:`nav.lens`) and ``rig`` is the rectified pinhole rig those models define
   (:func:`nav.rectify.rectified_rig`); the onboard stack rectifies before stereo and VO
-  (:meth:`rover_sim.mission.onboard.Onboard.rectified`);
+  (:meth:`rover_sim.runtime.onboard.Onboard.rectified`);
 - IMU and wheel/steering encoder samples since the previous observation;
 - the commanded mast pointing;
 - the operator-given start pose of the drive (from the previous localisation and sun finding);
@@ -42,7 +42,7 @@ class StereoImages:
     """One stereo pair: greyscale images (uint8, H x W) and the onboard (calibrated) camera models.
 
     ``calibration`` None: the images are rectified for ``rig``. Otherwise they are raw, and ``rig`` is the rectified
-    rig of ``calibration`` (what stereo and VO see after :meth:`~rover_sim.mission.onboard.Onboard.rectified`)."""
+    rig of ``calibration`` (what stereo and VO see after :meth:`~rover_sim.runtime.onboard.Onboard.rectified`)."""
 
     camera: str  # "navcam", "hazcam_front" or "hazcam_rear"
     t_s: float
@@ -82,7 +82,7 @@ def require_observation(obj: object, where: str) -> Observation:
     """Return ``obj`` if it is exactly an :class:`Observation`; otherwise refuse (subclasses could smuggle truth)."""
     if type(obj) is not Observation:
         raise NotAnObservation(
-            f"{where} accepts only rover_sim.mission.observation.Observation (sensor data), got "
+            f"{where} accepts only rover_sim.world.observation.Observation (sensor data), got "
             f"{type(obj).__module__}.{type(obj).__qualname__}: the onboard stack never sees ground truth"
         )
     return obj  # type: ignore[return-value]

@@ -31,17 +31,12 @@ import time
 import traceback
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from rover_sim.apps.sweep_jobs import GridAxis, Job, JobResult, SweepResult
+from rover_sim.apps.sweep_plots import plot_sweep
 from rover_sim.errors import ConfigError, DaskUnavailable, SchedulerUnreachable
-from rover_sim.mission.sweep_plots import (  # noqa: F401 - the single plots re-exported from here
-    plot_error_vs_slope,
-    plot_slip_map,
-    plot_slip_vs_slope,
-    plot_sweep,
-)
 
 #: metrics.json keys copied into results.csv (the issue's metric set), in column order
 METRIC_COLUMNS = (
@@ -63,69 +58,6 @@ DASK_CONNECT_TIMEOUT_S = 30.0
 # Same thread limits as Dask's nanny (distributed.nanny.pre-spawn-environ), so both backends compute alike and
 # K workers on K cores do not oversubscribe them.
 WORKER_THREAD_ENV = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-
-
-# ------------------------------------------------------------------------------------------------- data types
-
-
-@dataclass(frozen=True)
-class GridAxis:
-    """One ``--grid dotted.key=v1,v2,...``: the raw TOML text of each value (as ``--set`` takes it) and its value."""
-
-    key: str
-    raw: tuple[str, ...]
-    values: tuple[Any, ...]
-
-
-@dataclass(frozen=True)
-class Job:
-    """One run of the sweep: a grid point and a seed, with the scenario resolved and validated."""
-
-    job_id: str
-    params: dict[str, Any]  # grid key -> value, in grid order
-    seed: int
-    scenario: dict[str, Any]  # Scenario.resolved_dict(); what the worker runs, and what job_id hashes
-
-    @property
-    def label(self) -> str:
-        return " ".join([f"{k.rsplit('.', 1)[-1]}={v}" for k, v in self.params.items()] + [f"seed={self.seed}"])
-
-
-@dataclass
-class JobResult:
-    job_id: str
-    status: str  # "ok": the mission ran (whether or not it met its pass criterion); "failed": it raised or crashed
-    metrics: dict[str, Any] | None = None  # metrics.json
-    error: str | None = None  # one line, for results.csv
-    traceback: str | None = None
-    cached: bool = False  # read from an earlier run's metrics.json
-
-    @property
-    def ok(self) -> bool:
-        return self.status == "ok"
-
-
-@dataclass
-class SweepResult:
-    out_dir: Path
-    axes: list[GridAxis]
-    jobs: list[Job]
-    results: list[JobResult]  # same order as jobs
-    wall_s: float
-    csv_path: Path
-    plots: list[Path] = field(default_factory=list)
-
-    @property
-    def n_cached(self) -> int:
-        return sum(r.cached for r in self.results)
-
-    @property
-    def n_failed(self) -> int:
-        return sum(not r.ok for r in self.results)
-
-    @property
-    def n_run(self) -> int:
-        return len(self.results) - self.n_cached
 
 
 JobFn = Callable[[Job, str], JobResult]
@@ -160,7 +92,7 @@ def _split_top_level(text: str) -> list[str]:
 
 def parse_grid(text: str) -> GridAxis:
     """``terrain.slope.slope_deg=10,15,20`` -> a :class:`GridAxis`; values are TOML like ``--set`` values."""
-    from rover_sim.mission.scenario import parse_override
+    from rover_sim.scenario.loading import parse_override
 
     if "=" not in text:
         raise ConfigError("--grid", text, "expected dotted.key=v1,v2,... (e.g. terrain.slope.slope_deg=10,15,20)")
@@ -192,7 +124,7 @@ def plan_jobs(
     ``overrides`` (``--set`` texts) apply to every job before the grid values. Points that resolve to the same
     scenario (``10`` and ``10.0``) are one job.
     """
-    from rover_sim.mission.scenario import load_scenario
+    from rover_sim.scenario.loading import load_scenario
 
     keys = [a.key for a in axes]
     if len(set(keys)) != len(keys):
@@ -239,10 +171,10 @@ def run_job(job: Job, jobs_dir: str) -> JobResult:
     """
     job_dir = Path(jobs_dir) / job.job_id
     try:
-        from rover_sim.mission.scenario import Scenario
+        from rover_sim.scenario.schema import Scenario
 
         scenario = Scenario.model_validate(job.scenario)
-        from rover_sim.mission.run import run_scenario
+        from rover_sim.runtime.run import run_scenario
 
         metrics = run_scenario(scenario, job_dir, record=False)
         return JobResult(job.job_id, "ok", metrics=metrics.deterministic_dict())  # = its metrics.json

@@ -12,10 +12,11 @@ import numpy as np
 from nav.trajectory import write_tum
 from rover_sim import interrupts
 from rover_sim.io.blueprint import RunLayout, blueprint_for
-from rover_sim.io.recording import NullRecorder, Recorder
-from rover_sim.mission.evaluator import Metrics
-from rover_sim.mission.pipeline import Mission
-from rover_sim.mission.scenario import AutonavCmd, Scenario
+from rover_sim.io.recorder_protocol import NullRecorder, Recorder
+from rover_sim.runtime.evaluator import Metrics
+from rover_sim.runtime.runner import Mission
+from rover_sim.scenario.commands import AutonavCmd
+from rover_sim.scenario.schema import Scenario
 
 
 def layout_of(sc: Scenario) -> RunLayout:
@@ -162,7 +163,7 @@ def _run(
     import time
 
     from rover_sim.io.recording import RerunRecorder
-    from rover_sim.mission.scenario import load_scenario
+    from rover_sim.scenario.loading import load_scenario
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
     if out_dir is not None:

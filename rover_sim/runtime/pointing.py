@@ -27,12 +27,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from nav.vo.texture import MIN_OVERLAP
 
 if TYPE_CHECKING:
-    from rover_sim.mission.pipeline import Mission
+    from rover_sim.runtime.onboard import Onboard
+    from rover_sim.scenario.schema import Scenario
+    from rover_sim.world.world import World
 
 POOR_VIEW_FEATURES = 60  # the planned view is poor below this many trackable features (3x VO's min_features)
 CANDIDATES_DEG = ((0.0, 0.0), (12.0, 0.0), (-12.0, 0.0), (0.0, 8.0), (0.0, -8.0))  # (pan, elevation) offsets
@@ -40,6 +42,19 @@ PAN_STEP_DEG, ELEVATION_STEP_DEG = 12.0, 8.0  # one step back toward home, at mo
 MAX_PAN_OFFSET_DEG = 30.0  # stay within this of the scenario's commanded pan
 MAX_ELEVATION_OFFSET_DEG = 8.0  # and within one candidate step of its elevation (the footprint's range)
 SETTLE_S = 1.0  # a small mast move settles within a second
+
+
+class PointingRunner(Protocol):
+    """What texture seeking uses of the runner (:class:`rover_sim.runtime.runner.Mission` is one)."""
+
+    sc: Scenario
+    world: World
+    onboard: Onboard
+    pointing_changes: int
+
+    def point_mast(self, pan_deg: float, elevation_deg: float, settle_s: float = ...) -> None: ...
+
+    def event(self, text: str, level: str = "INFO") -> None: ...
 
 
 @dataclass(frozen=True)
@@ -82,7 +97,7 @@ def choose_pointing(
     return max(usable, key=lambda c: (c.features, -offset_from_home_deg(c.pan_deg, c.elevation_deg, home)))
 
 
-def _image_candidate(mission: Mission, pan_deg: float, elevation_deg: float) -> PointingCandidate:
+def _image_candidate(mission: PointingRunner, pan_deg: float, elevation_deg: float) -> PointingCandidate:
     """Point the mast, image a pair and count its texture (the onboard stack's view of it)."""
     world, camera = mission.world, mission.sc.nav.camera
     _move_to(mission, pan_deg, elevation_deg)
@@ -91,7 +106,7 @@ def _image_candidate(mission: Mission, pan_deg: float, elevation_deg: float) -> 
     return PointingCandidate(pan_deg, elevation_deg, n, overlap)
 
 
-def _move_to(mission: Mission, pan_deg: float, elevation_deg: float) -> None:
+def _move_to(mission: PointingRunner, pan_deg: float, elevation_deg: float) -> None:
     """Point the mast there (if it is not already) and take the onboard calibration at that pointing."""
     world = mission.world
     if (world.mast_pan_deg, world.mast_elevation_deg) != (pan_deg, elevation_deg):
@@ -99,7 +114,7 @@ def _move_to(mission: Mission, pan_deg: float, elevation_deg: float) -> None:
     world.calibrate(mission.sc.nav.camera)
 
 
-def _return_home(mission: Mission, home: tuple[float, float], pan0: float, el0: float) -> str:
+def _return_home(mission: PointingRunner, home: tuple[float, float], pan0: float, el0: float) -> str:
     """Point the mast home for a step VO cannot use; counts the change and returns the event's note on it."""
     _move_to(mission, *home)
     if home == (pan0, el0):
@@ -108,7 +123,7 @@ def _return_home(mission: Mission, home: tuple[float, float], pan0: float, el0: 
     return f"; mast back to the commanded pan {home[0]:.0f}, elevation {home[1]:.0f} deg"
 
 
-def seek_texture(mission: Mission) -> bool:
+def seek_texture(mission: PointingRunner) -> bool:
     """Repoint the mast if the planned view is predicted poor. Returns True if no pointing had texture."""
     ob, world, sc = mission.onboard, mission.world, mission.sc
     camera = sc.nav.camera
@@ -158,7 +173,7 @@ def seek_texture(mission: Mission) -> bool:
     return False
 
 
-def _log_change(mission: Mission, planned: int, c: PointingCandidate, why: str) -> None:
+def _log_change(mission: PointingRunner, planned: int, c: PointingCandidate, why: str) -> None:
     mission.pointing_changes += 1
     mission.event(
         f"texture-seeking pointing{': ' + why if why else ''}: planned view {planned} trackable features; mast to "

@@ -1,6 +1,6 @@
 """Every pass criterion in one place: the scenario judge and the benchmarks' acceptance bars.
 
-A scenario's own criteria live in its ``[pass]`` table (:class:`rover_sim.mission.scenario.PassSpec`) and are
+A scenario's own criteria live in its ``[pass]`` table (:class:`rover_sim.scenario.criteria.PassSpec`) and are
 judged by :func:`judge`; the benchmarks' bars are the constants below (each with the issue or paper it comes from).
 The CLI and the benchmark modules read them from here and nowhere else.
 """
@@ -11,10 +11,11 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from rover_sim.mission.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_POSITIVE_FRACTION
-from rover_sim.mission.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
-from rover_sim.mission.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
-from rover_sim.mission.scenario import DistributionSpec, KeepOut, PassSpec
+from rover_sim.runtime.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_POSITIVE_FRACTION
+from rover_sim.runtime.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
+from rover_sim.runtime.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
+from rover_sim.scenario.commands import KeepOut
+from rover_sim.scenario.criteria import DistributionSpec, PassSpec
 
 TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
 FALSE_POSITIVE_M = EVAL_FALSE_POSITIVE_M  # false positive: error > max(this, FALSE_POSITIVE_FRACTION x step)

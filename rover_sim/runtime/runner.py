@@ -3,7 +3,7 @@
 It owns nothing the algorithms need to know about (kiss-icp ``pipeline.py`` style): the :class:`World` (physics,
 soil, sensors, rendering), the :class:`Onboard` stack (dead reckoning, VO, stereo, GESTALT; fed only
 :class:`Observation` objects), the :class:`Evaluator` (the only place truth meets the estimates) and the recorder
-(a sink). Autonav (:mod:`rover_sim.mission.autonav`) and rock surveys (:mod:`rover_sim.mission.survey`) drive a
+(a sink). Autonav (:mod:`rover_sim.apps.autonav`) and rock surveys (:mod:`rover_sim.apps.survey`) drive a
 :class:`Mission` through its public methods only.
 
 Per 8 Hz tick (:meth:`Mission.tick`): sensors -> Observation -> onboard dead reckoning -> evaluator (truth beside
@@ -22,38 +22,28 @@ from collections.abc import Callable
 
 import numpy as np
 
-from nav.geometry import R_to_rpy
 from nav.trajectory import Pose, Trajectory
 from rover_sim import interrupts
 from rover_sim.errors import PhysicsDiverged, PluginError
-from rover_sim.io.recording import NullRecorder, Recorder
-from rover_sim.mission import acceptance
-from rover_sim.mission.acceptance import TALL_ROCK_M
-from rover_sim.mission.clock import VO_STEP_COMPUTE_S
-from rover_sim.mission.evaluator import Evaluator, Metrics, VoStepRecord
-from rover_sim.mission.observation import Observation
-from rover_sim.mission.onboard import Onboard, VoStep, heading_rad
-from rover_sim.mission.plugins import make_planner, make_stereo, make_vo
-from rover_sim.mission.pointing import seek_texture
-from rover_sim.mission.rover_shape import rover_shape
-from rover_sim.mission.rut_log import RutLog
-from rover_sim.mission.scenario import (
-    ArcCmd,
-    AutonavCmd,
-    DriveCmd,
-    GotoCmd,
-    MastCmd,
-    Scenario,
-    SleepCmd,
-    TurnCmd,
-    VoSpec,
-)
-from rover_sim.mission.sol import BudgetSpent, SolBudget
-from rover_sim.mission.world import World
+from rover_sim.io.recorder_protocol import NullRecorder, Recorder
+from rover_sim.io.rut_log import RutLog
+from rover_sim.runtime import acceptance
+from rover_sim.runtime.acceptance import TALL_ROCK_M
+from rover_sim.runtime.evaluator import Evaluator, Metrics, VoStepRecord
+from rover_sim.runtime.onboard import Onboard, VoStep, heading_rad
+from rover_sim.runtime.plugins import make_planner, make_stereo, make_vo
+from rover_sim.runtime.pointing import seek_texture
+from rover_sim.runtime.runner_recording import RunRecording
+from rover_sim.runtime.sol import BudgetSpent, SolBudget
+from rover_sim.scenario.commands import ArcCmd, AutonavCmd, DriveCmd, GotoCmd, MastCmd, SleepCmd, TurnCmd
+from rover_sim.scenario.nav_spec import VoSpec
+from rover_sim.scenario.schema import Scenario
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace, execute
 from rover_sim.sim.physics import WHEEL_RADIUS_M, RoverSim
-
-__all__ = ["Halt", "Metrics", "Mission", "TALL_ROCK_M", "VoStepRecord"]
+from rover_sim.world.clock import VO_STEP_COMPUTE_S
+from rover_sim.world.observation import Observation
+from rover_sim.world.rover_shape import rover_shape
+from rover_sim.world.world import World
 
 GOTO_HEADING_TOLERANCE_RAD = math.radians(5.0)
 MAST_SETTLE_S = 2.0  # a mast command waits this long for the servos before imaging
@@ -92,8 +82,9 @@ def onboard_for(scenario: Scenario, start_pose: Pose, vo: VoSpec, on_event: Call
     )
 
 
-class Mission:
-    """One scenario run. ``run()`` returns :class:`Metrics`; :func:`rover_sim.io.outputs.write_outputs` writes them."""
+class Mission(RunRecording):
+    """One scenario run. ``run()`` returns :class:`Metrics`; :func:`rover_sim.runtime.run.write_outputs` writes them.
+    What it logs to the recorder beyond events and poses is in :class:`RunRecording`."""
 
     def __init__(
         self,
@@ -119,7 +110,7 @@ class Mission:
         self.error: str | None = None
         self.interrupted: KeyboardInterrupt | None = None  # Ctrl-C or SIGTERM (errors.Terminated) stopped the run
         self.step = 0
-        self.autonav_stats = None  # set by rover_sim.mission.autonav when the scenario uses autonav
+        self.autonav_stats = None  # set by rover_sim.apps.autonav when the scenario uses autonav
         self._autonav_runs: list = []  # the stats of each autonav command run (several in a drive of several sols)
         # public hooks (sinks): exporters, surveys and user code subscribe; none may change the run
         self.vo_listeners: list[Callable[[VoStep, np.ndarray], None]] = []  # (step, T_rover_cam of the pair)
@@ -216,7 +207,7 @@ class Mission:
         elif isinstance(cmd, GotoCmd):
             self.goto(cmd)
         elif isinstance(cmd, AutonavCmd):
-            from rover_sim.mission.autonav import run_autonav  # autonav drives this class: imported at use
+            from rover_sim.apps.autonav import run_autonav  # autonav drives this class: imported at use
 
             try:
                 run_autonav(self, cmd)
@@ -434,79 +425,6 @@ class Mission:
     def event(self, text: str, level: str = "INFO") -> None:
         self.events.append(f"[{self.sim.time_s:8.2f}s] {level}: {text}")
         self.rec.log_event(self.sim.time_s, self.step, text, level)
-
-    def log_terrain_tiles(self) -> None:
-        """A streamed site: log the tiles of the current window not logged before (each tile once)."""
-        self._terrain_version = self.sim.terrain_version
-        if self.sim.streamer is not None:
-            for key, tile_terrain in self.sim.streamer.new_tiles(self.terrain):
-                self.rec.log_terrain_tile(key, tile_terrain)
-
-    def log_static(self) -> None:
-        if self.sim.streamer is not None:
-            self.log_terrain_tiles()
-        elif self.sim.deform is not None:  # the ground as tiles re-logged where ruts change them (mission/rut_log.py)
-            self.rec.log_terrain(self.terrain, ground=False)
-            self.rut_log = RutLog(self.sim, self.rec)
-            self.rut_log.log_all(self.sim.time_s, self.step)
-        else:
-            self.rec.log_terrain(self.terrain)
-        for z in self.sc.keep_out:
-            self.rec.log_keep_out(z.name, z.x_m, z.y_m, z.radius_m, float(self.terrain.height_at(z.x_m, z.y_m)))
-        self.rec.log_camera(self.sc.nav.camera, self.world.onboard_rig(self.sc.nav.camera), self.sim.time_s)
-
-    def log_tracks(self, t: float) -> None:
-        ev = self.evaluator
-        for name, poses in (("truth", ev.truth), ("dead_reckoning", ev.dr_poses)):
-            self.rec.log_trajectory(name, t, self.step, poses.positions_xyz_m)
-        if self.onboard.vo is not None:
-            self.rec.log_trajectory("vo", t, self.step, ev.onboard_poses.positions_xyz_m)
-        truth = ev.truth[-1]
-        rpy = R_to_rpy(truth.R_world_rover)
-        gt = self.sim.ground_truth()
-        errors = {
-            "position_error_m/dead_reckoning": float(
-                np.linalg.norm(ev.dr_poses[-1].position_xyz_m - truth.position_xyz_m)
-            )
-        }
-        if self.onboard.vo is not None:
-            errors["position_error_m/vo"] = float(
-                np.linalg.norm(ev.onboard_poses[-1].position_xyz_m - truth.position_xyz_m)
-            )
-        slip = float(np.nanmean(gt.wheel_slip)) if np.isfinite(gt.wheel_slip).any() else math.nan
-        self.rec.log_scalars(
-            t,
-            self.step,
-            {
-                "tilt_deg": gt.tilt_deg,
-                "roll_deg": math.degrees(rpy[0]),
-                "pitch_deg": math.degrees(rpy[1]),
-                **errors,
-                "wheel_slip_pct": 100.0 * slip,
-                "sinkage_mean_m": float(np.mean(gt.wheel_sinkage_m)),
-            },
-        )
-
-    def log_frame(self, obs, camera: str, res) -> None:  # noqa: ANN001
-        pair = self.onboard.rectified(obs, camera)
-        t = self.sim.time_s
-        self.rec.log_camera(camera, pair.rig, t)
-        disparity = None
-        if self.rec.wants_images():
-            # dense stereo of the VO pair, for the recording only (placed with the onboard pose)
-            ri = self.onboard.range_image(obs, camera)
-            disparity = ri.disparity_px
-            from nav.camera import transform_points
-
-            pts = transform_points(self.onboard.pose.as_matrix(), ri.points_rover_m())
-            near = np.linalg.norm(pts[:, :2] - pts[:, :2].mean(0), axis=1) < 15
-            self.rec.log_points(camera, t, self.step, pts[near])
-        self.rec.log_stereo_images(camera, t, self.step, pair.left_u8, pair.right_u8, disparity)
-        tracks = getattr(res, "tracks", None)
-        if tracks is not None and len(tracks):
-            inliers = getattr(res, "inliers", None)
-            inl = inliers if inliers is not None else np.ones(len(tracks), bool)
-            self.rec.log_vo_features(camera, t, self.step, tracks.uv_prev_left, tracks.uv_cur_left, inl)
 
     # ------------------------------------------------------------------ evaluation
     def metrics(self, wall_s: float) -> Metrics:

@@ -11,7 +11,7 @@ One seeded draw per run (stream ``LENS_SEED_STREAM`` of the scenario seed) gives
 
 The onboard model of a camera is the true model (lens, mounting) at the **commanded** mast pointing with these
 errors applied. :class:`MastEncoders` draws, per repointing, where the mast truly stops (resolution + backlash).
-Sizes and sources: :mod:`rover_sim.mission.lens_spec`.
+Sizes and sources: :mod:`rover_sim.scenario.lens_spec`.
 """
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ from scipy.spatial.transform import Rotation
 from nav.camera import PinholeCamera, StereoRig
 from nav.lens import CahvorCamera, CameraModel, FisheyeCamera
 from nav.rectify import StereoCalibration, rectification
-from rover_sim.mission.lens_spec import LensErrorSpec
 from rover_sim.render.cameras import STEREO_PAIRS, camera_model
 from rover_sim.render.lens import nominal_model, with_rotation
+from rover_sim.scenario.lens_spec import LensErrorSpec
 
 LENS_SEED_STREAM = 16_001  # independent of the other seeded streams of a scenario
 MAST_SEED_STREAM = 16_002
@@ -84,14 +84,15 @@ class RunCalibration:
     def true_model(self, pinhole: PinholeCamera) -> CameraModel:
         """The true raw camera for ``pinhole`` (MJCF camera, any size): the lens design with ``T_rover_cam`` =
         ``pinhole.T_rover_cam`` turned by the mounting rotation."""
-        model = nominal_model(pinhole, self.spec)
+        model = nominal_model(pinhole, self.spec.navcam_r, self.spec.hazcam_k)
         T = np.asarray(pinhole.T_rover_cam, dtype=float).copy()
         T[:3, :3] = T[:3, :3] @ self.mount[pinhole.name]
         return replace(model, T_rover_cam=T)  # type: ignore[type-var]
 
     def render_model(self, pinhole: PinholeCamera) -> CameraModel:
         """The true raw camera with only its mounting rotation as ``T_rover_cam`` (relative to the MJCF camera)."""
-        return with_rotation(nominal_model(pinhole, self.spec), self.mount[pinhole.name])
+        nominal = nominal_model(pinhole, self.spec.navcam_r, self.spec.hazcam_k)
+        return with_rotation(nominal, self.mount[pinhole.name])
 
     def onboard_model(self, pinhole: PinholeCamera) -> CameraModel:
         """What the calibration says the camera is (``pinhole``: the MJCF camera at the commanded pointing)."""
@@ -163,7 +164,7 @@ def onboard_stereo_models(
 ) -> tuple[StereoRig, StereoCalibration | None]:
     """What flight software holds for ``camera``'s pair at ``px`` and the *commanded* mast pointing: without lens
     errors (``calibration`` None) the exact pinhole rig there (only the mast encoders err); with them the calibrated
-    raw models and the rectified rig they define (what :meth:`~rover_sim.mission.onboard.Onboard.rectified` uses)."""
+    raw models and the rectified rig they define (what :meth:`~rover_sim.runtime.onboard.Onboard.rectified` uses)."""
     names = [f"{camera}_left", f"{camera}_right"]
     pins = cameras_at_pointing(model, data, names, px, pan_deg, elevation_deg)
     if calibration is None:
@@ -187,15 +188,14 @@ def build_true_lens(  # noqa: ANN201
     names = [f"{p}_{s}" for p in pairs for s in ("left", "right")]
     models = {n: calibration.render_model(camera_model(model, data, n, native_px, native_px)) for n in names}
     spec = calibration.spec
-    if render_oversample is not None:
-        spec = spec.model_copy(update={"render_oversample": render_oversample})
-    return TrueLens(models, spec)
+    oversample = spec.render_oversample if render_oversample is None else render_oversample
+    return TrueLens(models, oversample, spec.hazcam_max_off_axis_deg)
 
 
 def render_rectified(renderer, calibration: RunCalibration, pair: str) -> tuple[np.ndarray, np.ndarray, StereoRig]:  # noqa: ANN001
     """Render ``pair`` raw (``renderer`` built with this calibration's true lens, :func:`build_true_lens`) and
     rectify it with the onboard models at the mast's current state: flight-profile pairs for benchmarks that run
-    outside a :class:`~rover_sim.mission.world.World` (e.g. ``bench stereo``). Returns (left, right, rig)."""
+    outside a :class:`~rover_sim.world.world.World` (e.g. ``bench stereo``). Returns (left, right, rig)."""
     px = renderer.config.resolution_px
     pins = [camera_model(renderer.sim.model, renderer.sim.data, f"{pair}_{s}", px, px) for s in ("left", "right")]
     calib = StereoCalibration(calibration.onboard_model(pins[0]), calibration.onboard_model(pins[1]), pins[0])

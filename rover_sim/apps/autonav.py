@@ -13,21 +13,15 @@ so the rover sees the ground it backs into. No safe arc: retrace the last drive 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from nav.gestalt import Arc as GestaltArc
 from nav.gestalt import arc_pose
-from rover_sim.mission.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
-from rover_sim.mission.onboard import (  # noqa: F401 (re-exported for callers of the old module)
-    MAX_RANGE_M,
-    SELF_MASK_HALF_LENGTH_M,
-    SELF_MASK_HALF_WIDTH_M,
-    PlanCycle,
-    terrain_points,
-)
+from rover_sim.runtime.onboard import PlanCycle
 from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
+from rover_sim.world.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
 
 # A sol's drive logs every cycle's hazcam pair but the cycle's detail (depth image, stereo points, goodness map,
 # arc votes: ~100 kB of the ~125 kB a cycle) only every SOL_DETAIL_EVERY-th cycle and on boxed-in cycles, so a
@@ -35,13 +29,40 @@ from rover_sim.sim.drive import Arc, Primitive, Straight, TurnInPlace
 SOL_DETAIL_EVERY = 4
 
 if TYPE_CHECKING:
-    from rover_sim.mission.observation import Observation
-    from rover_sim.mission.pipeline import Mission
-    from rover_sim.mission.scenario import AutonavCmd
+    from rover_sim.io.recorder_protocol import Recorder
+    from rover_sim.runtime.onboard import Onboard, VoStep
+    from rover_sim.scenario.commands import AutonavCmd
+    from rover_sim.scenario.schema import Scenario
+    from rover_sim.sim.physics import RoverSim
+    from rover_sim.world.observation import Observation
+    from rover_sim.world.world import World
 
 HAZCAM = "hazcam_front"
 REAR_HAZCAM = "hazcam_rear"  # imaged too while the rover is backing up (it does not otherwise look behind)
 MAX_BACKTRACKS = 12  # retraced steps allowed per autonav command before giving up
+
+
+class AutonavRunner(Protocol):
+    """What autonav uses of the runner (:class:`rover_sim.runtime.runner.Mission` is one): it drives, images and logs
+    through these and leaves its statistics in ``autonav_stats``."""
+
+    sc: Scenario
+    world: World
+    onboard: Onboard
+    rec: Recorder
+    step: int
+    autonav_stats: AutonavStats | None
+
+    @property
+    def sim(self) -> RoverSim: ...
+
+    def execute(self, prim: Primitive) -> None: ...
+
+    def vo_update(self) -> VoStep | None: ...
+
+    def notify_images(self, obs: Observation) -> None: ...
+
+    def event(self, text: str, level: str = "INFO") -> None: ...
 
 
 @dataclass
@@ -75,7 +96,7 @@ def _drives_backward(prim: Primitive) -> bool:
     return isinstance(prim, Straight | Arc) and prim.distance_m < 0
 
 
-def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
+def run_autonav(mission: AutonavRunner, cmd: AutonavCmd) -> AutonavStats:
     """Drive to the waypoint of ``cmd`` with GESTALT on the onboard pose (the loop in the module docstring)."""
     onboard = mission.onboard
     onboard.start_planning()
@@ -135,7 +156,7 @@ def run_autonav(mission: Mission, cmd: AutonavCmd) -> AutonavStats:
 
 
 def _log_cycle(
-    mission: Mission, obs: Observation, cycle: PlanCycle, arcs: list[GestaltArc], detail: bool = True
+    mission: AutonavRunner, obs: Observation, cycle: PlanCycle, arcs: list[GestaltArc], detail: bool = True
 ) -> None:
     """The cycle's rectified pair; with ``detail`` also its range (depth image, points), goodness map and votes."""
     rec, t, step = mission.rec, mission.sim.time_s, mission.step

@@ -38,7 +38,7 @@ from nav.protocols import (
 from nav.stereo import SadStereo
 from nav.vo import VisualOdometry
 from rover_sim.errors import PluginError
-from rover_sim.mission.scenario import BUILTIN, PlannerSpec, StereoSpec, VoSpec
+from rover_sim.scenario.nav_spec import BUILTIN, PlannerSpec, StereoSpec, VoSpec
 
 ENTRY_POINT_GROUP = "rover_sim.plugins"
 PROTOCOLS: dict[str, type] = {"vo": VisualOdometer, "stereo": StereoMatcher, "planner": Planner,

@@ -3,7 +3,7 @@
 MER drove a sol as a command sequence: blind segments the operators planned, then autonav for the rest of the
 day's time, visual odometry only where slopes called for it (Biesiadecki & Maimone 2006; Maimone et al. 2007).
 The day's drive ended when the drive-time budget or the distance budget ran out. :class:`SolBudget` reads the
-world's :class:`~rover_sim.mission.clock.MissionClock` (the one clock of the run, also moving the sun: the world
+world's :class:`~rover_sim.world.clock.MissionClock` (the one clock of the run, also moving the sun: the world
 charges driving with physics time and imaging per stereo pair; the pipeline charges computing per VO step and
 GESTALT cycle with the flight computer's published costs) and raises :class:`BudgetSpent` from the 8 Hz tick when
 either budget is spent. Distances are split by the mode the rover drove in.
@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rover_sim.mission.clock import DRIVE_ACTIVITIES, MissionClock
-from rover_sim.mission.scenario import SolSpec
+from rover_sim.scenario.commands import SolSpec
+from rover_sim.world.clock import DRIVE_ACTIVITIES, MissionClock
 
 MODES = ("blind", "blind_vo", "autonav")
 

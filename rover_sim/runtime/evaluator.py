@@ -2,7 +2,7 @@
 
 The pipeline hands it, at every tick, the true pose next to the onboard estimates, the contacts, and each VO step's
 outcome with the true motion over the same interval; :meth:`Evaluator.metrics` turns them into :class:`Metrics`
-and :func:`rover_sim.mission.acceptance.judge` decides pass/fail against the scenario's criteria.
+and :func:`rover_sim.runtime.acceptance.judge` decides pass/fail against the scenario's criteria.
 
 Slip is always measured from truth: per VO step (true progress along the previous heading over the wheel
 odometry's commanded distance) when VO ran, otherwise over windows of ``SLIP_WINDOW_M`` of commanded travel from
@@ -19,7 +19,7 @@ import numpy as np
 
 from nav.geometry import se3_inv
 from nav.trajectory import Pose, Trajectory, relative_errors
-from rover_sim.mission.pose_series import PoseSeries
+from rover_sim.runtime.pose_series import PoseSeries
 
 # An accepted VO update whose translation error exceeds max(FALSE_POSITIVE_M, FALSE_POSITIVE_FRACTION x the true
 # step) is a false positive (issue #17: 2 cm, or 5 % of a 35-75 cm step; MER VO's error was < 1 % of distance).
