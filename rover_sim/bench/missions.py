@@ -169,7 +169,7 @@ def bench_vo(
             f"{_segments(seg.get('dead_reckoning'))} | {_segments(seg.get('vo'))} | "
             f"{_metres(rms.get('dead_reckoning'))} / {_metres(rms.get('vo'))} | {_fmt(r['vo_convergence_pct'])} | "
             f"{r['false_positives']} | {_fmt(r['vo_step_ms_median'])} | {accept} | "
-            f"{'yes' if r['passed'] else 'NO'} |"
+            f"{acceptance.pass_cell(r['passed'], r['reason'])} |"
         )
     _print_nees(runs, chosen)
     write_json(json_path, results)
@@ -336,7 +336,7 @@ def bench_suite(
         print("|---|---:|---:|---:|---:|---:|---:|---:|---:|:-:|---|")
         for r in (r for r in rows if r["profile"] == profile):
             good = r["passed"] and not r["regressions"]
-            note = "; ".join(r["regressions"]) or r["reason"]
+            note = "; ".join(([] if r["passed"] else [r["reason"]]) + r["regressions"]) or r["reason"]
             seg, rms = r["kitti_segment_error_pct"], r["rms_position_error_m"]
             print(
                 f"| {r['scenario']} | {_fmt(r['distance_m'])} | {_fmt(r['max_slip_pct'])} | "

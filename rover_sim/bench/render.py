@@ -19,6 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from rover_sim.mission import acceptance
 from rover_sim.render.cameras import save_rig
 from rover_sim.render.renderer import RenderConfig, StereoRenderer, terrain_texture
 from rover_sim.sim.physics import RoverSim
@@ -91,6 +92,10 @@ def bench_render(json_path: str | None = None, n: int = 20, warmup: int = 3) -> 
         "mujoco_gl": os.environ.get("MUJOCO_GL", ""),
     }
     print(format_table(out))
+    verdict = acceptance.render_verdict(out)  # the one judge: this line, the JSON, the JUnit and the exit status
+    out["passed"], out["reasons"] = verdict.passed, verdict.reasons
+    for c in verdict.checks:
+        print(f"{c.name}: {c.measured} (acceptance {c.bar}): {c.cell()}")
     if json_path:
         Path(json_path).write_text(json.dumps(out, indent=2))
     return out

@@ -121,7 +121,7 @@ def bench_sweep(
         "parallel_s": round(parallel_s, 2),
         "ratio": round(ratio, 3),
         "accept_ratio": ACCEPT_RATIO,
-        "passed": ratio <= ACCEPT_RATIO,
+        "passed": None,  # below: acceptance.sweep_verdict
         "same_results": _metrics(serial) == _metrics(parallel),
         "mission_wall_s_mean_serial": round(sum(job_s) / len(job_s), 2),
         "mission_wall_s_mean_parallel": round(
@@ -134,6 +134,8 @@ def bench_sweep(
         "available_cores": {"before": round(cores_before, 2), "after": round(cores_after, 2)},
         "machine_busy": min(cores_before, cores_after) < BUSY_FRACTION * min(workers, default_workers()),
     }
+    verdict = acceptance.sweep_verdict(result)  # the one judge: this summary, the JSON, the JUnit, the exit status
+    result["passed"], result["reasons"] = verdict.passed, verdict.reasons
     print("| run | workers | jobs | wall (s) | ratio | load avg 1/5/15 min before -> after |")
     print("|---|---:|---:|---:|---:|---|")
     print(f"| serial (in process) | 0 | {result['jobs']} | {serial_s:.1f} | 1.00 | {load_s0} -> {load_s1} |")
@@ -142,7 +144,7 @@ def bench_sweep(
         f"{load_p0} -> {load_p1} |"
     )
     print(
-        f"\nratio {ratio:.2f} (accept <= {ACCEPT_RATIO}): {'PASS' if result['passed'] else 'FAIL'}; "
+        f"\nratio {ratio:.2f} (accept <= {ACCEPT_RATIO}): {verdict.checks[0].cell()}; "
         f"{result['cpus']} CPUs; mission wall per job {result['mission_wall_s_mean_serial']} s serial, "
         f"{result['mission_wall_s_mean_parallel']} s parallel; results identical: {result['same_results']}; "
         f"cores available to {workers} busy processes (CPU probe) {cores_before:.2f} before, {cores_after:.2f} after"

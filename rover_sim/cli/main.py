@@ -9,6 +9,7 @@ import typer
 
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported anywhere)
 from rover_sim.cli.export import export_cmd
+from rover_sim.cli.preflight import preflight
 from rover_sim.cli.status import finish, guarded
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
@@ -73,7 +74,8 @@ def bench_slip(
     """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
     if soil_model not in ("bekker", "wong_reece"):
         _fail(ValueError(f"--soil-model must be 'bekker' or 'wong_reece', not {soil_model!r}"))
-    with guarded():
+    preflight("bench slip", junit, files={"--json": json, "--png": png if soil_model == "wong_reece" else None})
+    with guarded(junit, "bench slip"):
         if soil_model == "wong_reece":
             from rover_sim.bench import mobility
             from rover_sim.bench.junit_cases import mobility_cases
@@ -92,7 +94,8 @@ def bench_slip(
 @bench_app.command("render")
 def bench_render_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
-    with guarded():
+    preflight("bench render", junit, files={"--json": json})
+    with guarded(junit, "bench render"):
         from rover_sim.bench.junit_cases import render_cases
         from rover_sim.bench.render import bench_render
 
@@ -111,7 +114,8 @@ def bench_stereo_cmd(
 ) -> None:
     """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px) at
     256x256 and 1024x1024; any --stereo plugin on the same 256 px pairs."""
-    with guarded():
+    preflight("bench stereo", junit, files={"--json": json}, plugins={"stereo": stereo})
+    with guarded(junit, "bench stereo"):
         from rover_sim.bench.junit_cases import stereo_cases
         from rover_sim.bench.stereo import bench_stereo
 
@@ -133,8 +137,9 @@ def bench_autonav_cmd(
 ) -> None:
     """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away); with --planner,
     --stereo or --vo the same fields run again with those parts swapped in."""
+    preflight("bench autonav", junit, files={"--json": json}, plugins={"vo": vo, "stereo": stereo, "planner": planner})
     path = str(json) if json else None
-    with guarded():
+    with guarded(junit, "bench autonav"):
         from rover_sim.bench.autonav import bench_autonav
         from rover_sim.bench.junit_cases import autonav_cases
         from rover_sim.mission.scenario import plugin_overrides
@@ -163,7 +168,8 @@ def bench_traverse_cmd(
 ) -> None:
     """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
     100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
-    with guarded():
+    preflight("bench traverse", junit, files={"--json": json}, dirs={"--out": out})
+    with guarded(junit, "bench traverse"):
         from rover_sim.bench.junit_cases import traverse_cases
         from rover_sim.bench.traverse import bench_traverse
 
@@ -176,7 +182,8 @@ def bench_dimes_cmd(
     json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50, junit: JunitOpt = None
 ) -> None:
     """DIMES: Monte-Carlo descents over winds and terrains; horizontal velocity error and featureless rejection."""
-    with guarded():
+    preflight("bench dimes", junit, files={"--json": json})
+    with guarded(junit, "bench dimes"):
         from rover_sim.bench.dimes import bench_dimes
         from rover_sim.bench.junit_cases import dimes_cases
 
@@ -187,7 +194,8 @@ def bench_dimes_cmd(
 @bench_app.command("sweep")
 def bench_sweep_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Sweep speed: 8 short jobs serially and on a 2-worker pool (acceptance: parallel <= 0.65x serial)."""
-    with guarded():
+    preflight("bench sweep", junit, files={"--json": json})
+    with guarded(junit, "bench sweep"):
         from rover_sim.bench.junit_cases import sweep_cases
         from rover_sim.bench.sweep import bench_sweep
 
@@ -210,7 +218,8 @@ def bench_rocks_cmd(
 ) -> None:
     """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
     figures by rock class (analytic / irregular) with --irregular-fraction."""
-    with guarded():
+    preflight("bench rocks", junit, files={"--json": json})
+    with guarded(junit, "bench rocks"):
         from rover_sim.bench.junit_cases import rocks_cases
         from rover_sim.bench.rocks import bench_rocks
 
@@ -235,6 +244,7 @@ def render_cmd(
     from rover_sim.mission.scenario import load_scenario
     from rover_sim.sim.world import Sun
 
+    preflight("render", dirs={"--out": out})
     pairs = ("navcam", *HAZCAM_PAIRS)
     if pair not in pairs:
         _fail(ValueError(f"--pair {pair!r}: choose from {', '.join(pairs)}"))
@@ -279,7 +289,8 @@ def bench_vo_cmd(
     for c in case or []:
         if c not in VO_CASES:
             _fail(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
-    with guarded():
+    preflight("bench vo", junit, files={"--json": json}, plugins={"vo": vo})
+    with guarded(junit, "bench vo"):
         from rover_sim.bench.junit_cases import vo_cases
         from rover_sim.bench.missions import bench_vo
 
@@ -330,8 +341,11 @@ def bench_suite_cmd(
     for p in profile or []:
         if p not in ("flight", "ideal"):
             _fail(ValueError(f"--profile {p!r}: choose flight or ideal"))
+    plugin_json = Path(json).with_suffix(".plugins.json") if json and (vo or stereo or planner) else None
+    files = {"--json": json, "--json (plugin rows)": plugin_json, "--baseline": baseline if update_baseline else None}
+    preflight("bench suite", junit, files=files, plugins={"vo": vo, "stereo": stereo, "planner": planner})
     path = str(json) if json else None
-    with guarded():
+    with guarded(junit, "bench suite"):
         from rover_sim.bench.junit_cases import suite_cases
         from rover_sim.bench.missions import bench_suite
         from rover_sim.mission.scenario import plugin_overrides
@@ -378,7 +392,8 @@ def run_cmd(
 
     if out is None:
         out, overwrite = Path("runs/latest"), True
-    with guarded():
+    preflight("run", junit, dirs={"--out": out}, plugins={"vo": vo, "stereo": stereo, "planner": planner})
+    with guarded(junit, "run"):
         from rover_sim.mission.run import run_scenario
         from rover_sim.mission.scenario import load_scenario, plugin_overrides
 
@@ -453,6 +468,7 @@ def sweep_cmd(
     set_: SetOpt = None,
 ) -> None:
     """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
+    preflight("sweep", dirs={"--out": out})
     from rover_sim.mission.sweep import run_sweep
 
     def report(done: int, total: int, job, result) -> None:
@@ -501,6 +517,7 @@ def stereo_command(
     window_px: Annotated[int, typer.Option("--window", help="SAD window side (odd).")] = 9,
 ) -> None:
     """MER SAD stereo on any rectified greyscale pair; writes float32 disparity."""
+    preflight("stereo", files={"--out": out})
     from rover_sim.cli.stereo import stereo_cmd
 
     try:

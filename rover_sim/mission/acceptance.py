@@ -1,8 +1,10 @@
-"""Every pass criterion in one place: the scenario judge and the benchmarks' acceptance bars.
+"""The one judge: every pass criterion and benchmark bar, and the verdicts built from them.
 
 A scenario's own criteria live in its ``[pass]`` table (:class:`rover_sim.mission.scenario.PassSpec`) and are
-judged by :func:`judge`; the benchmarks' bars are the constants below (each with the issue or paper it comes from).
-The CLI and the benchmark modules read them from here and nowhere else.
+judged by :func:`scenario_verdict`; each benchmark's bars are the typed constants below (each with the source it
+comes from) and are judged by its ``*_verdict`` function. A :class:`Verdict` holds every check (name, pass, the
+measured value, the bar, and why it failed); the console tables, the JSON's ``passed`` / ``reasons``, the JUnit
+cases (:mod:`rover_sim.bench.junit_cases`) and the exit status are all derived from it, here and nowhere else.
 """
 
 from __future__ import annotations
@@ -10,20 +12,84 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
+
 from rover_sim.mission.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_POSITIVE_FRACTION
 from rover_sim.mission.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
-from rover_sim.mission.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
+from rover_sim.mission.evaluator import MIN_DISTANCE_FOR_PCT_M, TEXTURED_VIEW_FRAC, Metrics
 from rover_sim.mission.scenario import KeepOut, PassSpec
 
 TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
 FALSE_POSITIVE_M = EVAL_FALSE_POSITIVE_M  # false positive: error > max(this, FALSE_POSITIVE_FRACTION x step)
 FALSE_POSITIVE_FRACTION = EVAL_FALSE_POSITIVE_FRACTION
+RUN_DID_NOT_COMPLETE = "run did not complete"
+
+
+@dataclass(frozen=True)
+class Check:
+    """One bar: ``why`` is the unmet bar with the measured value (empty when it passed)."""
+
+    name: str
+    passed: bool
+    why: str = ""
+    measured: str = ""
+    bar: str = ""
+
+    def cell(self) -> str:
+        """A console table's ok cell: ``yes`` or ``NO: why``."""
+        return pass_cell(self.passed, self.why or self.name)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """Every check of one run or benchmark; ``error``: it did not run to completion (a run error, interrupted)."""
+
+    checks: tuple[Check, ...] = ()
+    error: str | None = None
+
+    @property
+    def passed(self) -> bool:
+        return self.error is None and all(c.passed for c in self.checks)
+
+    @property
+    def reasons(self) -> list[str]:
+        return ([self.error] if self.error else []) + [c.why or c.name for c in self.checks if not c.passed]
+
+    @property
+    def reason(self) -> str:
+        return "; ".join(self.reasons) or "all criteria met"
+
+    def cell(self) -> str:
+        """A console table's pass cell: ``yes`` or ``NO: <reasons>``."""
+        return pass_cell(self.passed, self.reason)
+
+
+def check(name: str, ok: bool, why: str, measured: str = "", bar: str = "") -> Check:
+    return Check(name, bool(ok), "" if ok else why, measured, bar)
+
+
+def at_least(name: str, value: float | None, bar: float, fmt: str = "{:g}", op: str = ">=") -> Check:
+    """``value >= bar`` (``op="<="``: at most); ``fmt`` formats both, with their unit; None (not measured) fails."""
+    text, bar_text = "not measured" if value is None else fmt.format(value), f"{op} {fmt.format(bar)}"
+    ok = value is not None and (value >= bar if op == ">=" else value <= bar)
+    return check(name, ok, f"{name} {text} (need {bar_text})", text, bar_text)
+
+
+def at_most(name: str, value: float | None, bar: float, fmt: str = "{:g}") -> Check:
+    return at_least(name, value, bar, fmt, "<=")
+
+
+def pass_cell(passed: bool, reason: str) -> str:
+    """``yes``, or ``NO: <reason>`` (every failing console row says why)."""
+    return "yes" if passed else f"NO: {reason}"
 
 
 @dataclass(frozen=True)
 class AutonavBar:
-    """``bench autonav``: reach the goal on >= 95 % of fields, never touch a tall rock, plan within 50 ms."""
+    """``bench autonav``: reach the goal (within ``reach_m``) on >= 95 % of fields, never touch a tall rock,
+    plan within 50 ms."""
 
+    reach_m: float = 1.0
     min_reached_frac: float = 0.95
     max_collisions: int = 0
     max_cycle_ms: float = 50.0
@@ -31,7 +97,8 @@ class AutonavBar:
 
 @dataclass(frozen=True)
 class StereoBar:
-    """``bench stereo``: at most 1.5x StereoBM's time, fewer bad-1px pixels than StereoBM."""
+    """``bench stereo``: at most 1.5x StereoBM's time, fewer bad-1px pixels at least StereoBM's density, and both
+    SAD engines give the same disparity bit for bit."""
 
     max_time_ratio: float = 1.5
 
@@ -46,7 +113,7 @@ class RenderBar:
 @dataclass(frozen=True)
 class DimesBar:
     """``bench dimes``: 1-sigma horizontal velocity error <= 1.5 m/s (MER DIMES requirement), >= 50 descents, of
-    which >= 90 % give an accepted estimate (issue #17: one accepted descent of 50 must not pass)."""
+    which >= 90 % give an accepted estimate (one accepted descent of 50 must not pass), featureless rejected."""
 
     max_velocity_error_1sigma_m_s: float = 1.5
     min_runs: int = 50
@@ -72,53 +139,286 @@ class SweepBar:
     max_parallel_ratio: float = 0.65
 
 
-AUTONAV = AutonavBar()
-STEREO = StereoBar()
-RENDER = RenderBar()
-DIMES = DimesBar()
-ROCKS = RocksBar()
-SWEEP = SweepBar()
+@dataclass(frozen=True)
+class SlipBar:
+    """Uphill slip against the published MER anchors (REFERENCE.md section 2): flat sand (<= 5 deg) <= 10 %;
+    Eagle/Endurance sand 17-20 deg 40-65 %; loose sand/scree >= 30 deg >= 90 %; outcrop <= 20 deg <= 5 %.
+    ``bench slip --soil-model bekker`` adds parked drift, real-time factor and the ratio to bare MuJoCo."""
+
+    flat_sand_max: float = 0.10
+    eagle_sand: tuple[float, float] = (0.40, 0.65)
+    steep_sand_min: float = 0.90
+    outcrop_max: float = 0.05
+    max_parked_drift_m: float = 0.01
+    min_realtime_factor: float = 20.0
+    min_bare_ratio: float = 0.3
+
+
+@dataclass(frozen=True)
+class MobilityBar:
+    """``bench slip`` (Wong-Reece law): the mobility checks (MER anchors and the held-out checks)."""
+
+    max_step_pp: float = 8.0  # between sand slopes 1 deg apart, 10-25 deg
+    eagle_deg: tuple[float, ...] = (17.0, 18.0, 19.0, 20.0)
+    backslide_deg: tuple[float, float] = (25.0, 32.0)  # first slope with slip >= 100 % (Spirit Sol 206)
+    max_speed_effect_pp: float = 3.0
+    sinkage_ratio_i06: tuple[float, float] = (2.5, 7.0)  # Ding et al.: 3-7
+    min_cross_slope_sand_over_bedrock: float = 3.0
+    min_locked_wheel_ratio: float = 2.0
+    rut_depth_ratio: tuple[float, float] = (0.5, 1.5)
+    min_deform_realtime_factor: float = 50.0
+    min_deform_bare_ratio: float = 0.5
+
+
+@dataclass(frozen=True)
+class TraverseBar:
+    """``bench traverse``: 1 km -- >= 990 m, peak RSS <= 3 GB, RSS at the end within 15 % of RSS after 100 m,
+    recording <= 150 MB, real-time factor >= 15; spirit_plains_sol -- goal reached (onboard, 1 m), no contact with
+    a rock >= 25 cm, DR 1-6 %; opportunity_record_sol -- >= 200 m in its time budget."""
+
+    km_min_m: float = 990.0
+    max_peak_rss_mb: float = 3072.0
+    max_rss_growth: float = 0.15
+    max_recording_mb: float = 150.0
+    min_realtime_factor: float = 15.0
+    spirit_dr_pct: tuple[float, float] = (1.0, 6.0)
+    spirit_goal_m: float = 1.0
+    opportunity_min_m: float = 200.0
+
+
+AUTONAV, STEREO, RENDER, DIMES, ROCKS = AutonavBar(), StereoBar(), RenderBar(), DimesBar(), RocksBar()
+SWEEP, SLIP, MOBILITY, TRAVERSE = SweepBar(), SlipBar(), MobilityBar(), TraverseBar()
+
+
+def dimes_verdict(r: dict) -> Verdict:
+    """``bench dimes``: velocity error, the number of descents, the accepted fraction, featureless rejection."""
+    b, runs, acc = DIMES, r["runs"], r["accepted"]
+    frac = acc / max(runs, 1)
+    return Verdict((
+        at_most("horizontal velocity error 1-sigma", r["velocity_error_1sigma_mps"], b.max_velocity_error_1sigma_m_s,
+                "{:.2f} m/s"),
+        at_least("descents", runs, b.min_runs),
+        check("accepted fraction", acc >= b.min_accepted_frac * runs,
+              f"{acc} of {runs} descents accepted ({frac:.0%} < {b.min_accepted_frac:.0%})",
+              f"{acc}/{runs} ({frac:.0%})", f">= {b.min_accepted_frac:.0%}"),
+        check("featureless plain rejected", r["featureless_rejected"],
+              "an estimate was accepted over the featureless plain", bar="all rejected"),
+    ))  # fmt: skip
+
+
+def slip_anchor(material: str, slope_deg: float) -> str:
+    """Published MER slip at this terrain and slope and the acceptance band (:class:`SlipBar`)."""
+    b = SLIP
+    if material == "sand":
+        if slope_deg <= 5:
+            return f"flat sand: small; accept <= {100 * b.flat_sand_max:.0f} %"
+        if 17 <= slope_deg <= 20:
+            lo, hi = b.eagle_sand
+            return f"Eagle 17 deg ~50 %, Endurance 18-20 deg up to 50 %; accept {100 * lo:.0f}-{100 * hi:.0f} %"
+        if slope_deg >= 30:
+            return f"loose sand/scree 32 deg: 99.5 %; accept >= {100 * b.steep_sand_min:.0f} %"
+        return "(between anchors; monotonic)"
+    if slope_deg <= 20:
+        return f"outcrop: a few %, 'little slip' at 20 deg; accept <= {100 * b.outcrop_max:.0f} %"
+    return "(steep outcrop)"
+
+
+def slip_check(material: str, slope_deg: float, slip: float) -> Check:
+    """One uphill slip row against :func:`slip_anchor`'s band."""
+    b, s, a = SLIP, slip, slope_deg
+    if material == "sand":
+        lo, hi = b.eagle_sand
+        ok = (a > 5 or s <= b.flat_sand_max) and (not 17 <= a <= 20 or lo <= s <= hi)
+        ok = ok and (a < 30 or s >= b.steep_sand_min)
+    else:
+        ok = a > 20 or s <= b.outcrop_max
+    text = f"slip {100 * s:.1f} %"
+    return check(f"{material} {a:g} deg", ok, f"{material} {a:g} deg: {text} ({slip_anchor(material, a)})", text,
+                 slip_anchor(material, a))  # fmt: skip
+
+
+def slip_verdict(r: dict) -> Verdict:
+    """``bench slip --soil-model bekker``: every slip row, monotonic sand, parked drift, speed."""
+    b, mono = SLIP, r["sand_monotonic"]
+    rows = tuple(slip_check(x["material"], x["slope_deg"], x["slip"]) for x in r["rows"])
+    return Verdict(rows + (
+        check("sand slip monotonic in slope", mono, "sand slip not monotonic in slope", "yes" if mono else "no", "yes"),
+        at_most("parked 30 deg bedrock drift", 100 * r["parked_30deg_bedrock_drift_m"], 100 * b.max_parked_drift_m,
+                "{:.2f} cm"),
+        at_least("real-time factor", r["realtime_factor"], b.min_realtime_factor, "{:.0f}x"),
+        at_least("ratio to bare MuJoCo", r["bare_mujoco_ratio"], b.min_bare_ratio, "{:.2f}"),
+    ))  # fmt: skip
+
+
+def mobility_verdict(r: dict) -> Verdict:
+    """``bench slip`` (Wong-Reece): every slip row and the mobility checks of :class:`MobilityBar`."""
+    b, fine, ruts = MOBILITY, r["slip_fine_sand"], r["ruts"]
+    eagle, (lo, hi), (b0, b1) = [fine[f"{a:.0f}"] for a in b.eagle_deg], SLIP.eagle_sand, b.backslide_deg
+    back, speed, sink, (s0, s1) = r["backslide_slope_deg"], r["speed_effect_pp"], r["sinkage_ratio_i06"], b.sinkage_ratio_i06  # noqa: E501
+    cs, cb = r["cross_slope_drift_m_per_m"]["sand"], r["cross_slope_drift_m_per_m"]["bedrock"]["20"]
+    cm = 100 * SLIP.max_parked_drift_m
+
+    def need(name: str, ok: bool, text: str, bar: str) -> Check:
+        return check(name, ok, f"{name} {text} (need {bar})", text, bar)
+
+    return Verdict(tuple(slip_check(x["material"], x["slope_deg"], x["slip"]) for x in r["rows"]) + (
+        at_most("max step between slopes 1 deg apart, 10-25 deg", r["max_step_pp_10_25"], b.max_step_pp, "{:.1f} pp"),
+        need(f"sand slip at {' / '.join(f'{a:.0f}' for a in b.eagle_deg)} deg", all(lo <= s <= hi for s in eagle),
+             " / ".join(f"{100 * s:.0f}" for s in eagle) + " %", f"{100 * lo:.0f}-{100 * hi:.0f} % each (Eagle)"),
+        need("first slope with slip >= 100 %", back is not None and b0 <= back <= b1,
+             "none" if back is None else f"{back:.0f} deg", f"{b0:.0f}-{b1:.0f} deg (Spirit Sol 206: 125 % > 25 deg)"),
+        *(at_most(f"slip 1 vs 5 cm/s at {a} deg (held out)", speed[a], b.max_speed_effect_pp, "{:.1f} pp")
+          for a in ("15", "20")),
+        need("sinkage at slip 0.6 / static (single wheel)", s0 <= sink <= s1, f"{sink:.2f}",
+             f"{s0}-{s1:g} (Ding et al.: 3-7)"),
+        at_most("parked 30 deg bedrock, 60 s drift", 100 * r["parked_30deg_bedrock_drift_m"], cm, "{:.2f} cm"),
+        at_most("parked 30 deg sand, 60 s drift (held out)", 100 * r["parked_30deg_sand_drift_m"], cm, "{:.2f} cm"),
+        need("cross-slope drift sand 10/15/20/25 deg (held out)", bool(np.all(np.diff(list(cs.values())) > 0)),
+             " / ".join(f"{100 * v:.1f}" for v in cs.values()) + " cm/m", "grows with slope"),
+        need("cross-slope drift bedrock 20 deg", cs["20"] >= b.min_cross_slope_sand_over_bedrock * cb,
+             f"{100 * cb:.2f} cm/m", f"sand 20 deg >= {b.min_cross_slope_sand_over_bedrock:g}x this"),
+        at_least("locked right-front sinkage / free wheels (held out)", r["locked_wheel_sinkage_ratio"],
+                 b.min_locked_wheel_ratio, "{:.2f}"),
+        need("rut depth / law mean sinkage (3 m, flat sand)",
+             b.rut_depth_ratio[0] <= ruts["rut_depth_ratio"] <= b.rut_depth_ratio[1],
+             f"{ruts['rut_depth_ratio']:.2f}", f"{b.rut_depth_ratio[0]}-{b.rut_depth_ratio[1]}"),
+        need("second pass new sinkage / first pass", ruts["second_pass_sinkage_ratio"] < 1,
+             f"{ruts['second_pass_sinkage_ratio']:.2f}", "< 1"),
+        need("bedrock heightfield unchanged after a drive", r["bedrock_unchanged"],
+             "yes" if r["bedrock_unchanged"] else "NO", "yes"),
+        at_least("real-time factor, law + deformation, 0.04 m cells (CPU time, one core)",
+                 r["deformation_realtime_factor"], b.min_deform_realtime_factor, "{:.0f}x"),
+        at_least("ratio to bare MuJoCo step rate (same run)", r["deformation_bare_ratio"], b.min_deform_bare_ratio,
+                 "{:.2f}"),
+    ))  # fmt: skip
+
+
+def traverse_verdict(row: dict) -> Verdict:
+    """``bench traverse``: one case's bars (:class:`TraverseBar`)."""
+    b, name, out = TRAVERSE, row["name"], []
+    if name == "traverse_1km":
+        base, end = row["rss_100m_mb"], row["rss_end_mb"]
+        out = [
+            at_least("distance", row["distance_m"], b.km_min_m, "{:g} m"),
+            at_most("peak RSS", row["peak_rss_mb"], b.max_peak_rss_mb, "{:g} MB"),
+            check("RSS growth", base is not None and end <= (1.0 + b.max_rss_growth) * base,
+                  f"RSS {end} MB at the end vs {base} MB after 100 m (> {b.max_rss_growth:.0%})"),
+            at_most("recording size", row["recording_mb"], b.max_recording_mb, "{:g} MB"),
+            at_least("real-time factor", row["realtime_factor"], b.min_realtime_factor),
+        ]  # fmt: skip
+    elif name == "spirit_plains_sol":
+        (lo, hi), dr = b.spirit_dr_pct, row["dr_error_pct"]
+        out = [
+            at_most("goal distance on the onboard pose", row["onboard_goal_distance_m"], b.spirit_goal_m, "{:g} m"),
+            at_most(f"ticks touching rocks >= {TALL_ROCK_M * 100:.0f} cm", row["tall_rock_contacts"], 0),
+            check("DR error", dr is not None and lo <= dr <= hi, f"DR error {dr} % outside {lo}-{hi} %"),
+        ]  # fmt: skip
+    elif name == "opportunity_record_sol":
+        out = [at_least("distance", row["distance_m"], b.opportunity_min_m, "{:g} m")]
+    return Verdict(tuple(out))
+
+
+def rocks_verdict(r: dict) -> Verdict:
+    """``bench rocks``: :class:`RocksBar` and the chain adjustment beating DR and VO."""
+    b, c = ROCKS, r["chain_error_m"]
+    return Verdict((
+        at_least("extraction recall", r["recall"], b.recall, "{:.3f}"),
+        at_least("extraction precision", r["precision"], b.precision, "{:.3f}"),
+        at_most("model RMS", r["median_rms_m"], b.median_rms_m, "{:.3f} m"),
+        at_least("correct matches", r["match_correct_frac"], b.match_correct_frac, "{:.3f}"),
+        at_most("site-to-site error", r["site_error_pct"], b.site_error_pct, "{:.2f} %"),
+        at_least("model type, well observed", r["model_type_match_frac_well_observed"],
+                 b.model_type_match_frac_well_observed, "{:.2f}"),
+        check("chain adjustment beats DR and VO", c["adjusted"] < min(c["dead_reckoning"], c["vo"]),
+              f"chain: adjusted {c['adjusted']:.3f} m, DR {c['dead_reckoning']:.3f} m, VO {c['vo']:.3f} m",
+              f"{c['dead_reckoning']:.3f} / {c['vo']:.3f} / {c['adjusted']:.3f} m", "adjusted lowest"),
+    ))  # fmt: skip
+
+
+def stereo_verdict(agg: dict) -> Verdict:
+    """``bench stereo`` (one profile's aggregate): speed at every resolution, accuracy and density, engines."""
+    bar = STEREO.max_time_ratio
+    ratios = {"256": agg["ratio"]} | {k.removeprefix("ratio_"): v for k, v in agg.items() if k.startswith("ratio_")}
+    out = [check("speed vs StereoBM" if res == "256" else f"speed vs StereoBM @{res} px", ratio <= bar,
+                 f"speed ratio to StereoBM @{res} px {ratio:.2f} > {bar:g}", f"{ratio:.2f}", f"<= {bar:g}")
+           for res, ratio in sorted(ratios.items(), key=lambda kv: int(kv[0]))]  # fmt: skip
+    ours, bm = agg["ours_bad1"], agg["stereobm_bad1"]
+    out += [
+        check("bad-1px vs StereoBM", ours < bm, f"bad-1px {100 * ours:.2f} % >= StereoBM {100 * bm:.2f} %"),
+        check("density vs StereoBM", agg["ours_density"] >= agg["stereobm_density"],
+              f"density {100 * agg['ours_density']:.1f} % < StereoBM {100 * agg['stereobm_density']:.1f} %"),
+        check("SAD engines agree", agg.get("engines_agree", True), "the two SAD engines' disparities differ"),
+    ]  # fmt: skip
+    return Verdict(tuple(out))
+
+
+def render_verdict(r: dict) -> Verdict:
+    ms, bar = r["stereo_pair_256_shadows_ms"], RENDER.max_pair_256_shadows_ms
+    return Verdict((check("256x256 stereo pair with shadows", ms <= bar, f"256x256 pair with shadows {ms:.1f} ms > "
+                          f"{bar:g} ms", f"{ms:.1f} ms", f"<= {bar:g} ms"),))  # fmt: skip
+
+
+def sweep_verdict(r: dict) -> Verdict:
+    bar = SWEEP.max_parallel_ratio
+    return Verdict((check("2-worker speed-up", r["ratio"] <= bar, f"parallel/serial {r['ratio']} > {bar}",
+                          str(r["ratio"]), f"<= {bar}"),))  # fmt: skip
+
+
+def autonav_field_verdict(row: dict) -> Verdict:
+    """One ``bench autonav`` field: reached within ``AUTONAV.reach_m`` on the truth, no collision."""
+    if row.get("error"):
+        return Verdict(error=row["error"])
+    return Verdict((
+        check("reached", row["reached"], f"ended {row['goal_distance_m']} m from the goal (> {AUTONAV.reach_m:g} m)"),
+        check("no collision", not row["collision"],
+              f"{row['body_collisions']} body-collision ticks, {row['tall_rock_contacts']} tall-rock ticks"),
+    ))  # fmt: skip
+
+
+def autonav_verdict(r: dict) -> Verdict:
+    """``bench autonav`` summary bar (:class:`AutonavBar`)."""
+    b, ms, n = AUTONAV, r["cycle_ms_median"], r["runs"]
+    return Verdict((
+        check("reached fraction", r["reached"] >= b.min_reached_frac * n,
+              f"{r['reached']}/{n} reached (< {100 * b.min_reached_frac:.0f} %)"),
+        check("collisions", r["collisions"] <= b.max_collisions,
+              f"{r['collisions']} fields with collisions (> {b.max_collisions})"),
+        check("GESTALT cycle", ms is None or ms <= b.max_cycle_ms, f"GESTALT cycle {ms} ms (> {b.max_cycle_ms:g} ms)"),
+    ))  # fmt: skip
+
+
+DESCRIBE = (  # PassSpec field -> how describe() words it
+    ("max_vo_error_pct", "VO <= {:g} %"), ("min_dr_error_pct", "DR >= {:g} %"), ("max_dr_error_pct", "DR <= {:g} %"),
+    ("min_vo_convergence_pct", "convergence >= {:g} %"),
+    ("min_vo_textured_convergence_pct", "convergence on textured steps >= {:g} %"),
+    ("min_max_slip_pct", "slip >= {:g} %"), ("max_max_slip_pct", "slip <= {:g} %"),
+    ("max_false_positives", "{} false positives"), ("expect_halt", "{} halt"), ("goal_within_m", "goal within {:g} m"),
+    ("max_site_error_vs_dr", "site error <= {:g} x DR's"), ("max_body_collisions", "<= {} collisions"),
+    ("min_final_sinkage_m", "final sinkage >= {:g} m"), ("max_final_sinkage_m", "final sinkage <= {:g} m"),
+    ("min_final_slip_pct", "final slip >= {:g} %"),
+)  # fmt: skip
 
 
 def describe(p: PassSpec) -> str:
     """The scenario's criteria as one line (for benchmark tables)."""
-    parts = []
-    if p.max_vo_error_pct is not None:
-        parts.append(f"VO <= {p.max_vo_error_pct:g} %")
-    if p.min_dr_error_pct is not None:
-        parts.append(f"DR >= {p.min_dr_error_pct:g} %")
-    if p.max_dr_error_pct is not None:
-        parts.append(f"DR <= {p.max_dr_error_pct:g} %")
-    if p.min_vo_convergence_pct is not None:
-        alt = " or justified refusal" if p.justified_refusals else ""
-        parts.append(f"convergence >= {p.min_vo_convergence_pct:g} %{alt}")
-    if p.min_max_slip_pct is not None:
-        parts.append(f"slip >= {p.min_max_slip_pct:g} %")
-    if p.max_max_slip_pct is not None:
-        parts.append(f"slip <= {p.max_max_slip_pct:g} %")
-    if p.max_false_positives is not None:
-        parts.append(f"{p.max_false_positives} false positives")
-    if p.expect_halt is not None:
-        parts.append(f"{p.expect_halt} halt")
-    if p.goal_within_m is not None:
-        parts.append(f"goal within {p.goal_within_m:g} m")
-    if p.max_body_collisions is not None:
-        parts.append(f"<= {p.max_body_collisions} collisions")
-    if p.min_final_sinkage_m is not None:
-        parts.append(f"final sinkage >= {p.min_final_sinkage_m:g} m")
-    if p.max_final_sinkage_m is not None:
-        parts.append(f"final sinkage <= {p.max_final_sinkage_m:g} m")
-    if p.min_final_slip_pct is not None:
-        parts.append(f"final slip >= {p.min_final_slip_pct:g} %")
+    parts = [fmt.format(v) for key, fmt in DESCRIBE if (v := getattr(p, key)) is not None]
     return ", ".join(parts) or "runs to completion"
 
 
 def judge(
     m: Metrics, p: PassSpec, *, error: str | None, keep_out_info: dict | None, keep_out: list[KeepOut]
 ) -> tuple[bool, str]:
-    """Pass/fail of one run against its scenario's ``[pass]`` criteria; the reason names every unmet bound."""
+    """Pass/fail of one run and the reason naming every unmet bound (:func:`scenario_verdict`)."""
+    v = scenario_verdict(m, p, error=error, keep_out_info=keep_out_info, keep_out=keep_out)
+    return v.passed, v.reason
+
+
+def scenario_verdict(
+    m: Metrics, p: PassSpec, *, error: str | None, keep_out_info: dict | None, keep_out: list[KeepOut]
+) -> Verdict:
+    """One run against its scenario's ``[pass]`` criteria: one check per unmet bound, naming it."""
     if error:
-        return False, f"run did not complete: {error}"
+        return Verdict(error=f"{RUN_DID_NOT_COMPLETE}: {error}")
     fails: list[str] = []
 
     def need(ok: bool, text: str) -> None:
@@ -138,47 +438,52 @@ def judge(
     if p.max_dr_error_pct is not None and m.dr_error_pct is not None:
         need(m.dr_error_pct <= p.max_dr_error_pct, f"DR error {m.dr_error_pct} % > {p.max_dr_error_pct} %")
     if p.min_vo_convergence_pct is not None:
-        conv, what = m.vo_convergence_pct, "VO convergence"
-        if p.justified_refusals and m.vo_refusals_justified:
-            textured = m.vo_steps - m.vo_refusals_justified  # steps where some pointing had texture
-            conv = round(100.0 * m.vo_accepted / textured, 2) if textured else 100.0
-            what = f"VO convergence on textured steps ({m.vo_refusals_justified} justified refusals)"
-        need(conv is not None and conv >= p.min_vo_convergence_pct, f"{what} {conv} % < {p.min_vo_convergence_pct} %")
+        conv = m.vo_convergence_pct
+        need(conv is not None and conv >= p.min_vo_convergence_pct,
+             f"VO convergence {conv} % < {p.min_vo_convergence_pct} %")  # fmt: skip
+    if p.min_vo_textured_convergence_pct is not None:
+        conv, bar = m.vo_textured_convergence_pct, p.min_vo_textured_convergence_pct
+        need(conv is not None, f"VO convergence on textured steps not measured: no step had >= "
+             f"{100 * TEXTURED_VIEW_FRAC:.0f} % of its view on texture")  # fmt: skip
+        need(conv is None or conv >= bar, f"VO convergence on textured steps {conv} % "
+             f"({m.vo_textured_accepted}/{m.vo_textured_steps}) < {bar} %")  # fmt: skip
     if p.min_max_slip_pct is not None:
         need(m.max_slip_pct >= p.min_max_slip_pct, f"max slip {m.max_slip_pct} % < {p.min_max_slip_pct} %")
     if p.max_max_slip_pct is not None:
         need(m.max_slip_pct <= p.max_max_slip_pct, f"max slip {m.max_slip_pct} % > {p.max_max_slip_pct} %")
     if p.max_false_positives is not None:
-        need(
-            m.false_positives <= p.max_false_positives,
-            f"{m.false_positives} VO false positives > {p.max_false_positives}",
-        )
+        need(m.false_positives <= p.max_false_positives, f"{m.false_positives} VO false positives > "
+             f"{p.max_false_positives}")  # fmt: skip
     if p.expect_halt is not None:
         need(m.halted == p.expect_halt, f"expected a {p.expect_halt} halt, got {m.halted}")
     elif m.halted is not None:
         fails.append(f"unexpected {m.halted} halt")
     if p.expect_dead_reckoning_clear:
-        info = keep_out_info
-        need(
-            info is not None
-            and info["dead_reckoning_distance_m"] > info["onboard_distance_m"] + 0.1
-            and any(info["dead_reckoning_distance_m"] >= z.radius_m for z in keep_out),
-            "dead reckoning did not believe the rover clear at the keep-out halt",
-        )
+        d = None if keep_out_info is None else keep_out_info["dead_reckoning_distance_m"]
+        need(d is not None and d > keep_out_info["onboard_distance_m"] + 0.1 and any(d >= z.radius_m for z in keep_out),
+             "dead reckoning did not believe the rover clear at the keep-out halt")  # fmt: skip
     if p.goal_within_m is not None:
-        need(
-            m.goal_distance_m is not None and m.goal_distance_m <= p.goal_within_m,
-            f"ended {m.goal_distance_m} m from the goal (> {p.goal_within_m} m)",
-        )
+        g = m.goal_distance_m
+        need(g is not None and g <= p.goal_within_m, f"ended {g} m from the goal (> {p.goal_within_m} m)")
+    if p.max_site_error_vs_dr is not None:
+        _judge_sites(m.extra.get("sites"), p.max_site_error_vs_dr, need)
     if p.max_body_collisions is not None:
         need(m.body_collisions <= p.max_body_collisions, f"{m.body_collisions} body-collision ticks")
-        need(
-            m.tall_rock_contacts <= p.max_body_collisions,
-            f"{m.tall_rock_contacts} ticks touching rocks taller than {TALL_ROCK_M} m",
-        )
+        need(m.tall_rock_contacts <= p.max_body_collisions,
+             f"{m.tall_rock_contacts} ticks touching rocks taller than {TALL_ROCK_M} m")  # fmt: skip
     if p.judges_wheels():
         _judge_wheels(m.extra.get("wheels"), p, need)
-    return (not fails, "; ".join(fails) if fails else "all criteria met")
+    return Verdict(tuple(Check(text, False, text) for text in fails))
+
+
+def _judge_sites(sites: dict | None, factor: float, need: Callable[[bool, str], None]) -> None:
+    """Localisation (rock_localization): the onboard pose's mean horizontal error at the sites (goto ends) against
+    dead reckoning's; dead reckoning alone (VO off) scores exactly 1."""
+    if not sites:
+        need(False, "site errors not measured: no goto site")
+        return
+    on, dr = sites["onboard_mean_m"], sites["dead_reckoning_mean_m"]
+    need(on <= factor * dr, f"mean site error {on} m > {factor:g} x dead reckoning's {dr} m")
 
 
 def _judge_wheels(wheels: dict | None, p: PassSpec, need: Callable[[bool, str], None]) -> None:

@@ -197,6 +197,7 @@ class Mission:
                 self.vo_update()
         elif isinstance(cmd, GotoCmd):
             self.goto(cmd)
+            self.evaluator.site(self.world.truth_pose(), self.onboard.dead_reckoning.pose, self.onboard.pose)
         elif isinstance(cmd, AutonavCmd):
             from rover_sim.mission.autonav import run_autonav  # autonav drives this class: imported at use
 
@@ -362,6 +363,7 @@ class Mission:
         camera = self.sc.nav.camera
         no_texture = seek_texture(self) if self.sc.nav.vo.seek_texture else False
         frame = self.world.render(camera)
+        textured = self.world.textured_view_fraction(camera)  # truth: for the evaluator only
         obs = self.world.observation_with([], [], {camera: frame})
         self.notify_images(obs)
         out = self.onboard.vo_step(obs, camera)
@@ -370,6 +372,7 @@ class Mission:
         record = self.evaluator.vo_step(
             self.world.truth_pose(), res.status, res.motion_rover, out.commanded_m, int(res.n_inliers), out.ms,
             reason=str(getattr(res, "reason", "")), no_texture=no_texture, covariance=getattr(res, "covariance", None),
+            textured_frac=textured,
         )  # fmt: skip
         t = self.sim.time_s
         if record is not None:
