@@ -254,9 +254,9 @@ def mobility_verdict(r: dict) -> Verdict:
     """``bench slip`` (Wong-Reece): every slip row and the mobility checks of :class:`MobilityBar`."""
     b, fine, ruts = MOBILITY, r["slip_fine_sand"], r["ruts"]
     eagle, (lo, hi), (b0, b1) = [fine[f"{a:.0f}"] for a in b.eagle_deg], SLIP.eagle_sand, b.backslide_deg
-    back, speed, sink, (s0, s1) = r["backslide_slope_deg"], r["speed_effect_pp"], r["sinkage_ratio_i06"], b.sinkage_ratio_i06  # noqa: E501
+    back, speed, sink = r["backslide_slope_deg"], r["speed_effect_pp"], r["sinkage_ratio_i06"]
+    (s0, s1), cm = b.sinkage_ratio_i06, 100 * SLIP.max_parked_drift_m
     cs, cb = r["cross_slope_drift_m_per_m"]["sand"], r["cross_slope_drift_m_per_m"]["bedrock"]["20"]
-    cm = 100 * SLIP.max_parked_drift_m
 
     def need(name: str, ok: bool, text: str, bar: str) -> Check:
         return check(name, ok, f"{name} {text} (need {bar})", text, bar)

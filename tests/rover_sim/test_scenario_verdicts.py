@@ -129,6 +129,31 @@ def _rock_localization(legs: int, overrides: list[str]):
     return scenario_from_dict(tree, "<rock_localization>", overrides)
 
 
+SHORT_GOTO = {
+    "name": "short_goto",
+    "seed": 2,
+    "terrain": {"size_m": [10, 6], "cell_size_m": 0.05, "rocks": {"cover_fraction": 0.0}, "material": {"kind": "sand"},
+                "slope": {"slope_deg": 8, "azimuth_deg": 0}},
+    "start": {"x_m": -3.0},
+    "nav": {"vo": False, "vo_step_m": 0.5},
+    "commands": [{"type": "goto", "x_m": -1.0, "y_m": 0.5, "tolerance_m": 0.3},
+                 {"type": "goto", "x_m": 1.0, "y_m": 0.0, "tolerance_m": 0.3}],
+}  # fmt: skip
+
+
+def test_dead_reckoning_alone_fails_the_site_criterion(tmp_path) -> None:
+    """rock_localization's [pass] table on a short two-site drive up a sandy slope, VO off: the sites are recorded
+    at the goto ends and the onboard pose (dead reckoning) scores 1 against dead reckoning."""
+    tree = SHORT_GOTO | {"pass": load_scenario("rock_localization").passing.model_dump(exclude_none=True)}
+    m = run_scenario(scenario_from_dict(tree), tmp_path, record=False)
+    sites = m.extra["sites"]
+    assert len(sites["onboard_m"]) == 2 and sites["onboard_m"] == sites["dead_reckoning_m"]
+    assert sites["dead_reckoning_mean_m"] > 0
+    assert not m.passed and m.reason.startswith("mean site error"), m.reason
+    assert m.goal_distance_m is not None and m.goal_distance_m <= 2.0  # reaching the goal alone passed it before
+
+
+@pytest.mark.slow
 def test_dead_reckoning_alone_fails_rock_localization_first_leg(tmp_path) -> None:
     """VO off: the rover still reaches its goal (on dead reckoning), but localises no better than dead reckoning."""
     m = run_scenario(_rock_localization(1, ["nav.vo.enabled=false"]), tmp_path, record=False)

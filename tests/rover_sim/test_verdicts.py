@@ -126,6 +126,27 @@ def test_every_bench_bar_is_judged_in_acceptance() -> None:
     ]
 
 
+MOBILITY = {
+    "rows": [{"material": "sand", "slope_deg": 0.0, "slip": 0.03}, {"material": "sand", "slope_deg": 18.0, "slip": 0.5},
+             {"material": "bedrock", "slope_deg": 20.0, "slip": 0.02}],
+    "slip_fine_sand": {"17": 0.45, "18": 0.5, "19": 0.55, "20": 0.6}, "max_step_pp_10_25": 5.0,
+    "backslide_slope_deg": 28.0, "speed_effect_pp": {"15": 1.0, "20": 2.0}, "sinkage_ratio_i06": 3.5,
+    "parked_30deg_bedrock_drift_m": 0.002, "parked_30deg_sand_drift_m": 0.004,
+    "cross_slope_drift_m_per_m": {"sand": {"10": 0.01, "15": 0.02, "20": 0.04, "25": 0.08}, "bedrock": {"20": 0.005}},
+    "locked_wheel_sinkage_ratio": 2.5, "ruts": {"rut_depth_ratio": 0.9, "second_pass_sinkage_ratio": 0.6},
+    "bedrock_unchanged": True, "deformation_realtime_factor": 60.0, "deformation_bare_ratio": 0.7,
+}  # fmt: skip
+
+
+def test_mobility_verdict_names_each_unmet_bar() -> None:
+    """`bench slip`'s checks (once inline in bench/mobility.py) judged in acceptance, each failure with its value."""
+    assert acceptance.mobility_verdict(MOBILITY).passed
+    v = acceptance.mobility_verdict(MOBILITY | {"locked_wheel_sinkage_ratio": 1.4, "backslide_slope_deg": None})
+    assert v.reasons == ["first slope with slip >= 100 % none (need 25-32 deg (Spirit Sol 206: 125 % > 25 deg))",
+                         "locked right-front sinkage / free wheels (held out) 1.40 (need >= 2.00)"]  # fmt: skip
+    assert v.checks[0].name == "sand 0 deg" and len(v.checks) == 3 + 16
+
+
 # ---------------------------------------------------------------------------------------------- fail fast
 def test_a_typo_in_vo_stops_the_suite_before_any_run_and_writes_the_junit(tmp_path) -> None:
     """`bench suite --fast --vo nosuch:X --junit P`: exit 2, P holds one error case saying why."""
@@ -176,4 +197,5 @@ def test_an_interrupted_benchmark_says_interrupted_in_its_junit(tmp_path, monkey
 
 def test_failing_console_rows_carry_their_reason() -> None:
     assert acceptance.pass_cell(False, "VO error 4.0 % > 3.0 %") == "NO: VO error 4.0 % > 3.0 %"
-    assert acceptance.Verdict(error="run did not complete: interrupted (SIGTERM)").cell().endswith("interrupted (SIGTERM)")
+    stopped = acceptance.Verdict(error="run did not complete: interrupted (SIGTERM)")
+    assert stopped.cell() == "NO: run did not complete: interrupted (SIGTERM)"
