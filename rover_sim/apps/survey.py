@@ -385,5 +385,3 @@ def calibrate_range_bias(
         points = None if s.points is None else corrected_points(s.points, s.sensor_xyz_m, fit.beta_per_m)
         out.append(replace(s, rocks=rocks, points=points))
     return out, RangeCalibration(fit, True)
-
-

@@ -16,12 +16,12 @@ import numpy as np
 
 from rover_sim import interrupts
 from rover_sim.bench import write_json
-from rover_sim.runtime import acceptance
+from rover_sim.runtime.acceptance import bars
 from rover_sim.runtime.run import run_scenario
 from rover_sim.scenario.loading import scenario_from_dict
 
 GOAL_DISTANCE_M = 20.0
-REACH_M = 1.0
+REACH_M = bars.AUTONAV.reach_m  # the bar: rover_sim.runtime.acceptance
 
 
 def field_scenario(seed: int, cover: float = 0.10, max_height_m: float = 0.6) -> dict:
@@ -135,22 +135,20 @@ def bench_autonav(
         "stack": label,
         "rows": rows,
     }
-    bar = acceptance.AUTONAV
-    result["passed"] = bool(
-        result["reached"] >= bar.min_reached_frac * result["runs"]
-        and result["collisions"] <= bar.max_collisions
-        and (result["cycle_ms_median"] is None or result["cycle_ms_median"] <= bar.max_cycle_ms)
-    )
+    bar = bars.AUTONAV
+    verdict = bars.autonav_verdict(result)  # the one judge: this table, the JSON, the JUnit, the exit status
+    result["passed"], result["reasons"] = verdict.passed, verdict.reasons
     ms_text = "-" if result["cycle_ms_median"] is None else f"{result['cycle_ms_median']:.1f}"
     print()
     print(
-        "| runs | reached within 1 m | collisions (body, or rock >= 25 cm) | GESTALT cycle ms (median) | acceptance |"
+        f"| runs | reached within {bar.reach_m:g} m | collisions (body, or rock >= 25 cm) | GESTALT cycle ms (median) "
+        "| acceptance | pass |"
     )
-    print("|---:|---:|---:|---:|---|")
+    print("|---:|---:|---:|---:|---|---|")
     print(
         f"| {result['runs']} | {result['reached']} ({100 * result['reached'] / max(1, len(rows)):.0f} %) | "
         f"{result['collisions']} | {ms_text} | >= {100 * bar.min_reached_frac:.0f} % reached, "
-        f"{bar.max_collisions} collisions, <= {bar.max_cycle_ms:.0f} ms |"
+        f"{bar.max_collisions} collisions, <= {bar.max_cycle_ms:.0f} ms | {verdict.cell()} |"
     )
     write_json(json_path, result)
     return result

@@ -7,7 +7,7 @@ panorama (:mod:`rover_sim.orbital.panorama`, flight sensor profile) and a prior 
 told: 12 m per axis (3 sigma = 36 m) and 1.75 deg (the std of the yaw draw). Every localiser (the built-in, plugins)
 gets the same stops; errors are against the truth in the site frame (the map's registration error included).
 Panoramas are cached (``--cache``) so that localisers can be compared without rendering again.
-The verdict: :func:`rover_sim.runtime.acceptance.judge_globalloc`.
+The verdict: :func:`rover_sim.runtime.bars.judge_globalloc`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from nav.camera import StereoRig
 from nav.globalloc import OrbitalMap, PanoramaView
 from rover_sim.bench import write_json
 from rover_sim.bench.globalloc_sites import TERRAINS, site_scenario, stops_xy_yaw
-from rover_sim.runtime import acceptance
+from rover_sim.runtime.acceptance import bars
 
 PRIOR_MIN_M, PRIOR_MAX_M, PRIOR_YAW_DEG = 2.0, 35.0, 3.0
 PRIOR_SIGMA_M, PRIOR_SIGMA_YAW_DEG = 12.0, 1.75
@@ -173,11 +173,11 @@ def summarise(rows: list[StopResult]) -> dict:
         "stops": len(rows),
         "fixed": fixed,
         "refused": len(rows) - fixed,
-        "false_fixes": sum(1 for e in errs if e > acceptance.GLOBALLOC.false_fix_m),
+        "false_fixes": sum(1 for e in errs if e > bars.GLOBALLOC.false_fix_m),
         "median_error_m": float(np.median(errs)) if errs else None,
         "p90_error_m": float(np.percentile(errs, 90)) if errs else None,
         "compute_s_median": float(np.median([r.compute_s for r in rows])) if rows else None,
-        "success": sum(1 for e in errs if e <= acceptance.GLOBALLOC.false_fix_m),
+        "success": sum(1 for e in errs if e <= bars.GLOBALLOC.false_fix_m),
         "seeds": sorted({r.seed for r in rows}),
     }
 
@@ -213,7 +213,7 @@ def bench_globalloc(
         blocks = {t: summarise([r for r in rows[n] if r.terrain == t]) for t in terrains}
         total = sum(b["stops"] for b in blocks.values())
         success = sum(b["success"] for b in blocks.values()) / max(total, 1)
-        passed, reasons = acceptance.judge_globalloc(blocks)
+        passed, reasons = bars.judge_globalloc(blocks)
         out["localizers"][n] = {"terrains": {t: {k: v for k, v in b.items() if k not in ("seeds", "success")}
                                              for t, b in blocks.items()}, "success_rate": success}  # fmt: skip
         out["passed"] &= passed

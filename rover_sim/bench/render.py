@@ -22,6 +22,7 @@ import numpy as np
 from rover_sim.render.cameras import save_rig
 from rover_sim.render.config import RenderConfig
 from rover_sim.render.renderer import StereoRenderer, terrain_texture
+from rover_sim.runtime.acceptance import bars
 from rover_sim.sim.assembly import Sun
 from rover_sim.sim.physics import RoverSim
 from rover_sim.sim.sensors import point_mast
@@ -92,6 +93,10 @@ def bench_render(json_path: str | None = None, n: int = 20, warmup: int = 3) -> 
         "mujoco_gl": os.environ.get("MUJOCO_GL", ""),
     }
     print(format_table(out))
+    verdict = bars.render_verdict(out)  # the one judge: this line, the JSON, the JUnit and the exit status
+    out["passed"], out["reasons"] = verdict.passed, verdict.reasons
+    for c in verdict.checks:
+        print(f"{c.name}: {c.measured} (acceptance {c.bar}): {c.cell()}")
     if json_path:
         Path(json_path).write_text(json.dumps(out, indent=2))
     return out

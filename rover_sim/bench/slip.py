@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rover_sim.bench import write_json
+from rover_sim.runtime.acceptance import bars
 from rover_sim.sim.drive import MAX_WHEEL_SPEED_M_S, TICK_S, Straight, execute
 from rover_sim.sim.physics import RoverSim
 from terrains import MaterialSpec, RockSpec, RoughnessSpec, SlopeSpec, TerrainRecipe, synthesize
@@ -93,25 +94,12 @@ def physics_speed(sim_s: float = 20.0, seed: int = 0) -> tuple[float, float, flo
 
 
 def anchor(material: str, slope_deg: float) -> str:
-    """Published MER slip at this terrain and slope (REFERENCE.md section 2) and our acceptance band."""
-    if material == "sand":
-        if slope_deg <= 5:
-            return "flat sand: small; accept <= 10 %"
-        if 17 <= slope_deg <= 20:
-            return "Eagle 17 deg ~50 %, Endurance 18-20 deg up to 50 %; accept 40-65 %"
-        if slope_deg >= 30:
-            return "loose sand/scree 32 deg: 99.5 %; accept >= 90 %"
-        return "(between anchors; monotonic)"
-    if slope_deg <= 20:
-        return "outcrop: a few %, 'little slip' at 20 deg; accept <= 5 %"
-    return "(steep outcrop)"
+    """Published MER slip at this terrain and slope and our acceptance band (the bars: rover_sim.runtime.acceptance)."""
+    return bars.slip_anchor(material, slope_deg)
 
 
 def passes(row: SlipRow) -> bool:
-    s, a = row.slip, row.slope_deg
-    if row.material == "sand":
-        return (a > 5 or s <= 0.10) and (not 17 <= a <= 20 or 0.40 <= s <= 0.65) and (a < 30 or s >= 0.90)
-    return a > 20 or s <= 0.05
+    return bars.slip_check(row.material, row.slope_deg, row.slip).passed
 
 
 def run(json_path: str | None = None, slopes_deg: tuple[float, ...] = SLOPES_DEG, seed: int = 0) -> dict:
@@ -121,22 +109,6 @@ def run(json_path: str | None = None, slopes_deg: tuple[float, ...] = SLOPES_DEG
     sand = [r.slip for r in rows if r.material == "sand"]
     monotonic = bool(np.all(np.diff(sand) > 0))
 
-    print("| material | slope (deg) | slip (%) | published anchor / acceptance | ok |")
-    print("|---|---:|---:|---|:-:|")
-    for r in rows:
-        print(
-            f"| {r.material} | {r.slope_deg:.0f} | {100 * r.slip:.1f} | {anchor(r.material, r.slope_deg)} "
-            f"| {'yes' if passes(r) else 'NO'} |"
-        )
-    print()
-    print("| check | measured | acceptance |")
-    print("|---|---:|---|")
-    print(f"| sand slip monotonic in slope | {'yes' if monotonic else 'no'} | yes |")
-    print(f"| parked 30 deg bedrock, 60 s drift | {100 * drift:.2f} cm | < 1 cm |")
-    print(f"| real-time factor with wheel-soil law | {rtf:.0f}x | >= 20x |")
-    print(f"| 30 m drive at 5 cm/s (600 s simulated) | {600 / rtf:.1f} s wall | <= 30 s |")
-    print(f"| bare MuJoCo real-time factor (law off) | {rtf_bare:.0f}x | - |")
-    print(f"| ratio to bare MuJoCo step rate | {ratio:.2f} | >= 0.3 |")
     result = {
         "slip": [{"material": r.material, "slope_deg": r.slope_deg, "slip": r.slip} for r in rows],
         "realtime_factor": rtf,
@@ -144,8 +116,20 @@ def run(json_path: str | None = None, slopes_deg: tuple[float, ...] = SLOPES_DEG
         "parked_30deg_bedrock_drift_m": drift,
         "bare_realtime_factor": rtf_bare,
         "sand_monotonic": monotonic,
-        "all_pass": monotonic and drift < 0.01 and rtf >= 20 and ratio >= 0.3 and all(passes(r) for r in rows),
         "rows": [asdict(r) for r in rows],
     }
+    verdict = bars.slip_verdict(result)  # the one judge: these tables, the JSON, the JUnit, the exit status
+    result |= {"all_pass": verdict.passed, "reasons": verdict.reasons}
+    print("| material | slope (deg) | slip (%) | published anchor / acceptance | ok |")
+    print("|---|---:|---:|---|---|")
+    for r, c in zip(rows, verdict.checks, strict=False):  # the verdict's first checks are the rows, in order
+        print(f"| {r.material} | {r.slope_deg:.0f} | {100 * r.slip:.1f} | {c.bar} | {c.cell()} |")
+    print()
+    print("| check | measured | acceptance | ok |")
+    print("|---|---:|---|---|")
+    for c in verdict.checks[len(rows) :]:
+        print(f"| {c.name} | {c.measured} | {c.bar} | {c.cell()} |")
+    print(f"| 30 m drive at 5 cm/s (600 s simulated) | {600 / rtf:.1f} s wall | - | reported |")
+    print(f"| bare MuJoCo real-time factor (law off) | {rtf_bare:.0f}x | - | reported |")
     write_json(json_path, result)
     return result

@@ -141,8 +141,10 @@ def print_gate(stack: StackResult) -> None:
         for k, g in per.items():
             rel = "-" if g.delta_median_rel is None else f"{100 * g.delta_median_rel:+.1f} %"
             mdc = "-" if g.min_detectable_rel is None else f"{100 * g.min_detectable_rel:.1f} %"
-            print(f"| {sc} | {k} | {g.n_pairs} | {g.delta_median:+.3g} ({rel}) | {g.p_value:.3g} | {g.threshold:.3g} | "
-                  f"{g.min_attainable_p:.2g} | {mdc} | {'YES' if g.regressed else 'no'} |")
+            print(
+                f"| {sc} | {k} | {g.n_pairs} | {g.delta_median:+.3g} ({rel}) | {g.p_value:.3g} | {g.threshold:.3g} | "
+                f"{g.min_attainable_p:.2g} | {mdc} | {'YES' if g.regressed else 'no'} |"
+            )
 
 
 def _seed_text(seeds: Seeds) -> str:
@@ -336,8 +338,9 @@ def suite_json(stacks: list[StackResult], seeds: Seeds, perturb: tuple[float, in
         "perturb": None if perturb is None else perturb[0],
         "perturb_seed": None if perturb is None else perturb[1],
         "environment": environment(),
-        "baseline": None if baseline is None else {"path": str(store), "environment": baseline.environment,
-                                                   "seeds": list(baseline.seeds)},  # fmt: skip
+        "baseline": None
+        if baseline is None
+        else {"path": str(store), "environment": baseline.environment, "seeds": list(baseline.seeds)},  # fmt: skip
         "passed": all(st.passed for st in stacks if not st.replayed),
         "profiles": stack_json(stacks[0]),
         "plugins": {st.label: {"profiles": stack_json(st)} for st in stacks[1:] if not st.replayed},

@@ -20,10 +20,10 @@ from pathlib import Path
 from rover_sim.apps.sweep import default_workers, run_sweep
 from rover_sim.apps.sweep_jobs import SweepResult
 from rover_sim.bench import write_json
-from rover_sim.runtime import acceptance
+from rover_sim.runtime.acceptance import bars
 
 GRID = ("terrain.slope.slope_deg=0,5,10,15", "terrain.material.kind=sand,bedrock")
-ACCEPT_RATIO = acceptance.SWEEP.max_parallel_ratio  # bars: rover_sim.runtime.acceptance
+ACCEPT_RATIO = bars.SWEEP.max_parallel_ratio  # bars: rover_sim.runtime.acceptance
 DRIVE_M = 10.0  # per job: a few seconds on one idle core (setup ~0.7 s, 200 s of physics, outputs)
 
 SCENARIO_TOML = """
@@ -122,7 +122,7 @@ def bench_sweep(
         "parallel_s": round(parallel_s, 2),
         "ratio": round(ratio, 3),
         "accept_ratio": ACCEPT_RATIO,
-        "passed": ratio <= ACCEPT_RATIO,
+        "passed": None,  # below: bars.sweep_verdict
         "same_results": _metrics(serial) == _metrics(parallel),
         "mission_wall_s_mean_serial": round(sum(job_s) / len(job_s), 2),
         "mission_wall_s_mean_parallel": round(
@@ -135,6 +135,8 @@ def bench_sweep(
         "available_cores": {"before": round(cores_before, 2), "after": round(cores_after, 2)},
         "machine_busy": min(cores_before, cores_after) < BUSY_FRACTION * min(workers, default_workers()),
     }
+    verdict = bars.sweep_verdict(result)  # the one judge: this summary, the JSON, the JUnit, the exit status
+    result["passed"], result["reasons"] = verdict.passed, verdict.reasons
     print("| run | workers | jobs | wall (s) | ratio | load avg 1/5/15 min before -> after |")
     print("|---|---:|---:|---:|---:|---|")
     print(f"| serial (in process) | 0 | {result['jobs']} | {serial_s:.1f} | 1.00 | {load_s0} -> {load_s1} |")
@@ -143,7 +145,7 @@ def bench_sweep(
         f"{load_p0} -> {load_p1} |"
     )
     print(
-        f"\nratio {ratio:.2f} (accept <= {ACCEPT_RATIO}): {'PASS' if result['passed'] else 'FAIL'}; "
+        f"\nratio {ratio:.2f} (accept <= {ACCEPT_RATIO}): {verdict.checks[0].cell()}; "
         f"{result['cpus']} CPUs; mission wall per job {result['mission_wall_s_mean_serial']} s serial, "
         f"{result['mission_wall_s_mean_parallel']} s parallel; results identical: {result['same_results']}; "
         f"cores available to {workers} busy processes (CPU probe) {cores_before:.2f} before, {cores_after:.2f} after"

@@ -7,9 +7,10 @@ and every 50 m for the details JSON (``rss_trace_mb``: [true path m, RSS MB] pai
 The recording is written (``recording.rrd``) and its size reported. Errors: dead reckoning and VO (final, % of the
 distance; the 10 m KITTI segment error from metrics.json), the autonav outcome and the true distance to the goal.
 
-Bars (issue #18): 1 km -- peak RSS <= 3 GB, RSS at the end within 15 % of RSS after 100 m, recording <= 150 MB,
-real-time factor >= 15; spirit_plains_sol -- goal reached, no contact with a rock >= 25 cm, DR 1-6 %;
-opportunity_record_sol -- >= 200 m in its time budget.
+Bars: :class:`rover_sim.runtime.acceptance.bars.TraverseBar` (1 km -- peak RSS <= 3 GB, RSS at the end within 15 % of
+RSS after 100 m, recording <= 150 MB, real-time factor >= 15; spirit_plains_sol -- goal reached, no contact with a
+rock >= 25 cm, DR 1-6 %; opportunity_record_sol -- >= 200 m in its time budget), judged by
+:func:`~rover_sim.runtime.acceptance.bars.traverse_verdict`.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from pathlib import Path
 from rover_sim.bench import write_json
 from rover_sim.errors import ConfigError
 from rover_sim.resources import data_dir, scenarios_dir
+from rover_sim.runtime.acceptance import bars
 
 BENCH_DIR = data_dir("benchmarks")
 CASES = {
@@ -30,13 +32,6 @@ CASES = {
 }
 RSS_PROBE_M = 100.0
 RSS_TRACE_M = 50.0  # the details JSON samples RSS every this much true path (rss_trace_mb)
-MAX_PEAK_RSS_MB = 3072.0
-MAX_RSS_GROWTH = 0.15
-MAX_RECORDING_MB = 150.0
-MIN_REALTIME_FACTOR = 15.0
-SPIRIT_DR_PCT = (1.0, 6.0)
-OPPORTUNITY_MIN_M = 200.0
-KM_MIN_M = 990.0
 
 
 def rss_mb() -> float:
@@ -114,35 +109,6 @@ def run_case(name: str, out_dir: str, overrides: tuple[str, ...] = ()) -> dict:
     }
 
 
-def judge(row: dict) -> tuple[bool, str]:
-    """The issue's bar for this case: (passed, why not)."""
-    name, why = row["name"], []
-    if name == "traverse_1km":
-        if row["distance_m"] < KM_MIN_M:
-            why.append(f"distance {row['distance_m']} m < {KM_MIN_M}")
-        if row["peak_rss_mb"] > MAX_PEAK_RSS_MB:
-            why.append(f"peak RSS {row['peak_rss_mb']} MB > {MAX_PEAK_RSS_MB}")
-        base = row["rss_100m_mb"]
-        if base is None or row["rss_end_mb"] > (1.0 + MAX_RSS_GROWTH) * base:
-            why.append(f"RSS {row['rss_end_mb']} MB at the end vs {base} MB after 100 m (> {MAX_RSS_GROWTH:.0%})")
-        if row["recording_mb"] > MAX_RECORDING_MB:
-            why.append(f"recording {row['recording_mb']} MB > {MAX_RECORDING_MB}")
-        if row["realtime_factor"] < MIN_REALTIME_FACTOR:
-            why.append(f"real-time factor {row['realtime_factor']} < {MIN_REALTIME_FACTOR}")
-    elif name == "spirit_plains_sol":
-        lo, hi = SPIRIT_DR_PCT
-        dr = row["dr_error_pct"]
-        if row["onboard_goal_distance_m"] is None or row["onboard_goal_distance_m"] > 1.0:
-            why.append(f"goal not reached on the onboard pose ({row['onboard_goal_distance_m']} m)")
-        if row["tall_rock_contacts"] > 0:
-            why.append(f"{row['tall_rock_contacts']} ticks touching rocks >= 25 cm")
-        if dr is None or not lo <= dr <= hi:
-            why.append(f"DR error {dr} % outside {lo}-{hi} %")
-    elif name == "opportunity_record_sol" and row["distance_m"] < OPPORTUNITY_MIN_M:
-        why.append(f"distance {row['distance_m']} m < {OPPORTUNITY_MIN_M}")
-    return not why, "; ".join(why)
-
-
 def _run_isolated(name: str, out_dir: str, overrides: tuple[str, ...]) -> dict:
     """``run_case`` in a fresh spawn process (never fork: the renderer holds a GL context)."""
     import multiprocessing
@@ -174,14 +140,15 @@ def bench_traverse(
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
     for name in names:
         row = _run_isolated(name, out_dir, overrides)
-        row["passed"], row["why"] = judge(row)
+        verdict = bars.traverse_verdict(row)  # the one judge: this table, the JSON, the JUnit, the exit status
+        row["passed"], row["why"] = verdict.passed, "; ".join(verdict.reasons)
         rows.append(row)
         print(f"| {name} | {row['distance_m']:.1f} | {row['wall_s']:.0f} | {row['realtime_factor']:.1f} | "
               f"{row['peak_rss_mb']:.0f} | {row['rss_100m_mb']} | {row['rss_end_mb']:.0f} | "
               f"{row['recording_mb']:.1f} | "
               f"{row['dr_error_pct']} | {row['dr_10m_segment_pct']} | {row['vo_error_pct']} | "
               f"{row['goal_distance_m']} / {row['onboard_goal_distance_m']} | "
-              f"{'yes' if row['passed'] else 'NO: ' + row['why']} |", flush=True)  # fmt: skip
+              f"{verdict.cell()} |", flush=True)  # fmt: skip
     result = {"cases": [{k: r[k] for k in PUBLIC_KEYS} for r in rows]}
     write_json(json_path, result)
     if json_path:

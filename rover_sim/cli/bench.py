@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from rover_sim.cli.options import IMPL_HELP, JsonOpt, JunitOpt, PlannerOpt, StereoOpt, VoOpt, bad_input
+from rover_sim.cli.preflight import preflight
 from rover_sim.cli.status import finish, guarded
 
 bench_app = typer.Typer(help="Benchmarks: print a markdown table, optionally write JSON.", no_args_is_help=True)
@@ -36,7 +37,8 @@ def bench_slip(
     """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
     if soil_model not in ("bekker", "wong_reece"):
         bad_input(ValueError(f"--soil-model must be 'bekker' or 'wong_reece', not {soil_model!r}"))
-    with guarded():
+    preflight("bench slip", junit, files={"--json": json, "--png": png if soil_model == "wong_reece" else None})
+    with guarded(junit, "bench slip"):
         if soil_model == "wong_reece":
             from rover_sim.bench import mobility
             from rover_sim.bench.junit_cases import mobility_cases
@@ -55,7 +57,8 @@ def bench_slip(
 @bench_app.command("render")
 def bench_render_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
-    with guarded():
+    preflight("bench render", junit, files={"--json": json})
+    with guarded(junit, "bench render"):
         from rover_sim.bench.junit_cases import render_cases
         from rover_sim.bench.render import bench_render
 
@@ -74,7 +77,8 @@ def bench_stereo_cmd(
 ) -> None:
     """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px) at
     256x256 and 1024x1024; any --stereo plugin on the same 256 px pairs."""
-    with guarded():
+    preflight("bench stereo", junit, files={"--json": json}, plugins={"stereo": stereo})
+    with guarded(junit, "bench stereo"):
         from rover_sim.bench.junit_cases import stereo_cases
         from rover_sim.bench.stereo import bench_stereo
 
@@ -97,7 +101,8 @@ def bench_autonav_cmd(
     """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away); with --planner,
     --stereo or --vo the same fields run again with those parts swapped in."""
     path = str(json) if json else None
-    with guarded():
+    preflight("bench autonav", junit, files={"--json": json}, plugins={"vo": vo, "stereo": stereo, "planner": planner})
+    with guarded(junit, "bench autonav"):
         from rover_sim.bench.autonav import bench_autonav
         from rover_sim.bench.junit_cases import autonav_cases
         from rover_sim.scenario.loading import plugin_overrides
@@ -126,7 +131,8 @@ def bench_traverse_cmd(
 ) -> None:
     """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
     100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
-    with guarded():
+    preflight("bench traverse", junit, files={"--json": json}, dirs={"--out": out})
+    with guarded(junit, "bench traverse"):
         from rover_sim.bench.junit_cases import traverse_cases
         from rover_sim.bench.traverse import bench_traverse
 
@@ -139,7 +145,8 @@ def bench_dimes_cmd(
     json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50, junit: JunitOpt = None
 ) -> None:
     """DIMES: Monte-Carlo descents over winds and terrains; horizontal velocity error and featureless rejection."""
-    with guarded():
+    preflight("bench dimes", junit, files={"--json": json})
+    with guarded(junit, "bench dimes"):
         from rover_sim.bench.dimes import bench_dimes
         from rover_sim.bench.junit_cases import dimes_cases
 
@@ -150,7 +157,8 @@ def bench_dimes_cmd(
 @bench_app.command("sweep")
 def bench_sweep_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Sweep speed: 8 short jobs serially and on a 2-worker pool (acceptance: parallel <= 0.65x serial)."""
-    with guarded():
+    preflight("bench sweep", junit, files={"--json": json})
+    with guarded(junit, "bench sweep"):
         from rover_sim.bench.junit_cases import sweep_cases
         from rover_sim.bench.sweep import bench_sweep
 
@@ -173,7 +181,8 @@ def bench_rocks_cmd(
 ) -> None:
     """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
     figures by rock class (analytic / irregular) with --irregular-fraction."""
-    with guarded():
+    preflight("bench rocks", junit, files={"--json": json})
+    with guarded(junit, "bench rocks"):
         from rover_sim.bench.junit_cases import rocks_cases
         from rover_sim.bench.rocks import bench_rocks
 
@@ -245,7 +254,8 @@ def bench_vo_cmd(
     for c in case or []:
         if c not in VO_CASES:
             bad_input(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
-    with guarded():
+    preflight("bench vo", junit, files={"--json": json}, plugins={"vo": vo})
+    with guarded(junit, "bench vo"):
         from rover_sim.bench.seeded import parse_perturb
         from rover_sim.bench.seeds import parse_seeds
         from rover_sim.bench.suite import PUBLISHED_SEEDS, interrupt_of
@@ -301,8 +311,9 @@ def bench_suite_cmd(
     junit: JunitOpt = None,
     profile: Annotated[
         list[str] | None,
-        typer.Option("--profile", help="Sensor profile(s) to run, flight or ideal (repeatable) [default: both; "
-                     "--fast: flight]."),
+        typer.Option(
+            "--profile", help="Sensor profile(s) to run, flight or ideal (repeatable) [default: both; --fast: flight]."
+        ),
     ] = None,
 ) -> None:
     """Run the scenario catalogue over seeds: per scenario the median [90 % CI] of each figure and its verdict over
@@ -320,7 +331,20 @@ def bench_suite_cmd(
     for p in profile or []:
         if p not in ("flight", "ideal"):
             bad_input(ValueError(f"--profile {p!r}: choose flight or ideal"))
-    with guarded():
+    plugin_json = Path(json).with_suffix(".plugins.json") if json and (vo or stereo or planner) else None
+    files = {"--json": json, "--json (plugin rows)": plugin_json, "--png": png,
+             "--baseline": baseline if update_baseline else None}  # fmt: skip
+    preflight(
+        "bench suite",
+        junit,
+        files=files,
+        plugins={
+            "vo": [*([vo] if isinstance(vo, str) else vo or []), *(replay_vo or [])],
+            "stereo": stereo,
+            "planner": planner,
+        },
+    )
+    with guarded(junit, "bench suite"):
         from rover_sim.bench.seeded import parse_perturb
         from rover_sim.bench.seeds import parse_seeds
         from rover_sim.bench.suite import GATE_SEEDS, PUBLISHED_SEEDS, bench_suite, interrupt_of, junit_cases

@@ -12,6 +12,7 @@ from rover_sim.cli.bench import bench_app
 from rover_sim.cli.export import export_cmd
 from rover_sim.cli.options import JunitOpt, PlannerOpt, SetOpt, StereoOpt, VoOpt, bad_input
 from rover_sim.cli.orbital import bench_globalloc_cmd, orbital_cmd
+from rover_sim.cli.preflight import preflight
 from rover_sim.cli.status import finish, guarded
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
@@ -100,7 +101,8 @@ def run_cmd(
 
     if out is None:
         out, overwrite = Path("runs/latest"), True
-    with guarded():
+    preflight("run", junit, dirs={"--out": out}, plugins={"vo": vo, "stereo": stereo, "planner": planner})
+    with guarded(junit, "run"):
         from rover_sim.runtime.run import run_scenario
         from rover_sim.scenario.loading import load_scenario, plugin_overrides
 
@@ -175,6 +177,7 @@ def sweep_cmd(
     set_: SetOpt = None,
 ) -> None:
     """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
+    preflight("sweep", dirs={"--out": out})
     from rover_sim.apps.sweep import run_sweep
 
     def report(done: int, total: int, job, result) -> None:
@@ -223,6 +226,7 @@ def stereo_command(
     window_px: Annotated[int, typer.Option("--window", help="SAD window side (odd).")] = 9,
 ) -> None:
     """MER SAD stereo on any rectified greyscale pair; writes float32 disparity."""
+    preflight("stereo", files={"--out": out})
     from rover_sim.cli.stereo import stereo_cmd
 
     try:

@@ -42,8 +42,11 @@ def orbital_cmd(
             "dem_units": "metres, heights of the ground with rocks",
             "orbital": spec_metadata(sc.orbital),
             "sources": "rover_sim/orbital/spec.py",
-            "registration_drawn": {"offset_xy_m": list(regs[0].offset_xy_m), "rotation_rad": regs[0].rotation_rad,
-                                   "note": "truth, for evaluation only: a localiser must not read it"},  # fmt: skip
+            "registration_drawn": {
+                "offset_xy_m": list(regs[0].offset_xy_m),
+                "rotation_rad": regs[0].rotation_rad,
+                "note": "truth, for evaluation only: a localiser must not read it",
+            },  # fmt: skip
         }
         for path in write_products(out, tiles, meta):
             typer.echo(str(path))
@@ -53,8 +56,11 @@ def bench_globalloc_cmd(
     json: Annotated[Path | None, typer.Option("--json", help="Write the results as JSON to this path.")] = None,
     localizer: Annotated[
         list[str] | None,
-        typer.Option("--localizer", help="A global localiser to run beside the built-in: 'pkg.module:Class' or an "
-                     "entry point in 'rover_sim.plugins' (nav.protocols.GlobalLocalizer). Repeatable."),
+        typer.Option(
+            "--localizer",
+            help="A global localiser to run beside the built-in: 'pkg.module:Class' or an "
+            "entry point in 'rover_sim.plugins' (nav.protocols.GlobalLocalizer). Repeatable.",
+        ),
     ] = None,  # fmt: skip
     seeds: Annotated[
         str | None, typer.Option("--seeds", help="Seeds as 'A-B' or 'A,B,C' (default: published 100-107).")

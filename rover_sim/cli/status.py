@@ -75,17 +75,31 @@ def fail(message: object, status: ExitStatus = ExitStatus.BAD_INPUT) -> typer.Ex
 
 
 @contextmanager
-def guarded() -> Iterator[None]:
+def guarded(junit: str | None = None, suite: str = "") -> Iterator[None]:
     """Around a command's body: a RoverSimError is one line on stderr (status 2 or 3), Ctrl-C exits 130 and
-    SIGTERM 143 with one line saying so (no traceback). SIGTERM raises :class:`Terminated` meanwhile."""
+    SIGTERM 143 with one line saying so (no traceback). SIGTERM raises :class:`Terminated` meanwhile. With
+    ``junit``, the JUnit file then holds one error case saying why (e.g. "interrupted (Ctrl-C)")."""
     try:
         with interrupts.sigterm_raises():
             yield
     except RoverSimError as e:
-        raise fail(e, of_error(e)) from None
+        status = of_error(e)
+        _junit_error(junit, suite, f"{'bad input' if status == ExitStatus.BAD_INPUT else RUN_DID_NOT_COMPLETE}: {e}")
+        raise fail(e, status) from None
     except KeyboardInterrupt as e:
+        _junit_error(junit, suite, f"{RUN_DID_NOT_COMPLETE}: {interrupts.describe(e)}")
         typer.secho(f"{interrupts.describe(e)}: stopped", fg=typer.colors.RED, err=True)
         raise typer.Exit(code=int(of_interrupt(e))) from None
+
+
+def _junit_error(junit: str | None, suite: str, message: str) -> None:
+    if junit:
+        from rover_sim.io.junit import error_case, write_junit
+
+        try:
+            write_junit(junit, suite or "rover-sim", [error_case(suite or "rover-sim", message)])
+        except OSError:  # the path was checked first (cli/preflight.py); a vanished directory is not worth a traceback
+            pass
 
 
 def exit_with(status: ExitStatus | int) -> None:

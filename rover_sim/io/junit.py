@@ -26,6 +26,12 @@ def case(name: str, classname: str, ok: bool, message: str, time_s: float = 0.0)
     return Case(name, classname, None if ok else message, None, time_s)
 
 
+def error_case(suite: str, message: str) -> Case:
+    """The one case of a command that never ran (bad input) or was stopped (interrupted): ``message`` says why."""
+    name = suite.replace(" ", ".")
+    return Case(name, name, failure=message, error=message)
+
+
 def write_junit(path: str | Path | None, suite: str, cases: list[Case]) -> None:
     """Write ``cases`` as one ``<testsuite>`` in a ``<testsuites>`` document (no-op when ``path`` is None)."""
     if not path:

@@ -110,8 +110,9 @@ def rocks_mesh(rocks: list) -> rr.Mesh3D:
     offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
     return rr.Mesh3D(
         vertex_positions=np.concatenate([np.asarray(m.vertices) for m in meshes]).astype(np.float32),
-        triangle_indices=np.concatenate([np.asarray(m.faces) + o for m, o in zip(meshes, offsets, strict=True)])
-        .astype(np.uint32),
+        triangle_indices=np.concatenate([np.asarray(m.faces) + o for m, o in zip(meshes, offsets, strict=True)]).astype(
+            np.uint32
+        ),
         albedo_factor=ROCK_RGBA,
     )
 

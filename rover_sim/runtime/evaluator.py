@@ -27,6 +27,12 @@ FALSE_POSITIVE_M = 0.02
 FALSE_POSITIVE_FRACTION = 0.05
 
 
+# A VO step is *textured* when at least this fraction of the ground seen by the left camera of both its pairs (the
+# previous and the current) lies on texture: the scenario's ``[[appearance.texture_patches]]`` discs inside
+# ``fine_soil``, or anywhere without ``fine_soil`` (see :meth:`rover_sim.world.world.World.textured_view_fraction`).
+TEXTURED_VIEW_FRAC = 0.5
+
+
 def false_positive_limit_m(step_m: float) -> float:
     """The largest translation error of an accepted update that is not a false positive, for a ``step_m`` step."""
     return max(FALSE_POSITIVE_M, FALSE_POSITIVE_FRACTION * abs(step_m))
@@ -60,10 +66,16 @@ class VoStepRecord:
     reason: str = ""  # why VO declined (empty when accepted)
     no_texture: bool = False  # the pointing search found no pointing with texture: a refusal here is justified
     true_step_m: float = math.nan  # |true translation| since the previous pair
+    textured_frac: float = math.nan  # truth: the smaller textured fraction of the two pairs' ground views
 
     @property
     def false_positive(self) -> bool:
         return self.status == "ok" and self.error_m > false_positive_limit_m(self.true_step_m)
+
+    @property
+    def textured(self) -> bool:
+        """Both pairs of the step see mostly textured ground (:data:`TEXTURED_VIEW_FRAC`, from truth)."""
+        return self.textured_frac >= TEXTURED_VIEW_FRAC
 
 
 @dataclass
@@ -88,7 +100,7 @@ class Metrics:
     vo_steps: int = 0
     vo_accepted: int = 0
     vo_refused_reasons: dict = field(default_factory=dict)  # refusal status -> count
-    vo_refusals_justified: int = 0  # refusals on steps where no pointing had texture (logged)
+    vo_refusals_justified: int = 0  # refusals on steps where no pointing had texture (logged; reported, not judged)
     pointing_changes: int = 0  # texture-seeking mast repointings
     max_vo_slip_pct: float | None = None
     body_collisions: int = 0  # ticks with the body (not a wheel) touching terrain or a rock
@@ -101,6 +113,11 @@ class Metrics:
     kitti_segment_error_pct: dict = field(default_factory=dict)
     rms_position_error_m: dict = field(default_factory=dict)
     extra: dict = field(default_factory=dict)
+    # VO over its textured steps (VoStepRecord.textured, from truth): every step after the first pair, a
+    # re-initialisation included (it gives no motion); None when no step was textured
+    vo_textured_steps: int = 0
+    vo_textured_accepted: int = 0
+    vo_textured_convergence_pct: float | None = None
     # wall-clock measurements: not deterministic, so written to timing.json rather than metrics.json
     timing: dict = field(default_factory=dict)
 
@@ -239,7 +256,9 @@ class Evaluator:
         self.body_collision_ticks = 0
         self.tall_rock_contact_ticks = 0
         self.keep_out_info: dict | None = None
+        self.sites: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []  # (truth, DR, onboard) xyz at each site
         self._last_frame_truth: np.ndarray | None = None
+        self._last_textured_frac = math.nan
 
     # ------------------------------------------------------------------ during the run
     def record(self, truth: Pose, dead_reckoning: Pose, onboard: Pose, commanded_m: float) -> None:
@@ -263,9 +282,12 @@ class Evaluator:
         reason: str = "",
         no_texture: bool = False,
         covariance: np.ndarray | None = None,
+        textured_frac: float = math.nan,
     ) -> VoStepRecord | None:
         """Score one VO step against the true motion since the previous pair (None for the first pair);
-        ``covariance``: the 6x6 VO reported (translation first, previous rover frame), for its consistency."""
+        ``covariance``: the 6x6 VO reported (translation first, previous rover frame), for its consistency;
+        ``textured_frac``: the textured fraction of this pair's ground view (truth; the step takes the smaller of
+        this pair's and the previous pair's)."""
         T_truth = truth.as_matrix()
         rec = None
         if self._last_frame_truth is not None and status != "first_frame":
@@ -297,10 +319,33 @@ class Evaluator:
                 reason,
                 no_texture,
                 float(np.linalg.norm(true_motion[:3, 3])),
+                min(textured_frac, self._last_textured_frac)
+                if math.isfinite(textured_frac + self._last_textured_frac)
+                else math.nan,
             )
             self.vo_steps.append(rec)
         self._last_frame_truth = T_truth
+        self._last_textured_frac = textured_frac
         return rec
+
+    def site(self, truth: Pose, dead_reckoning: Pose, onboard: Pose) -> None:
+        """A site (the end of a goto): where the rover is, beside where dead reckoning and the onboard pose put it."""
+        self.sites.append((truth.position_xyz_m.copy(), dead_reckoning.position_xyz_m.copy(),
+                           onboard.position_xyz_m.copy()))  # fmt: skip
+
+    def site_errors(self) -> dict | None:
+        """Horizontal position error at every site (m) of dead reckoning and of the onboard (VO-corrected) pose,
+        and their means (None without sites)."""
+        if not self.sites:
+            return None
+        truth, dr, onboard = (np.array(a)[:, :2] for a in zip(*self.sites, strict=True))
+        e_dr, e_on = np.linalg.norm(dr - truth, axis=1), np.linalg.norm(onboard - truth, axis=1)
+        return {
+            "dead_reckoning_m": [round(float(v), 4) for v in e_dr],
+            "onboard_m": [round(float(v), 4) for v in e_on],
+            "dead_reckoning_mean_m": round(float(e_dr.mean()), 4),
+            "onboard_mean_m": round(float(e_on.mean()), 4),
+        }
 
     def keep_out(self, zone_name: str, onboard_d: float, dr_d: float, true_d: float) -> dict:
         self.keep_out_info = {
@@ -361,6 +406,9 @@ class Evaluator:
             if len(true_slips) == 0:
                 true_slips = np.array([0.0])
         ms = [s.ms for s in steps]
+        textured = [s for s in steps if s.textured]
+        textured_ok = sum(1 for s in textured if s.status == "ok")
+        sites = self.site_errors()
         return Metrics(
             scenario=self.scenario_name,
             seed=self.seed,
@@ -398,8 +446,12 @@ class Evaluator:
                 "kitti_translation_error_pct": self.kitti(),
                 "vo_covariance_nees": vo_covariance_nees(self.vo_step_errors),
             }
+            | ({"sites": sites} if sites else {})
             | extra,
             timing={"vo_step_ms_median": round(float(np.median(ms)), 1) if ms else None} | timing,
+            vo_textured_steps=len(textured),
+            vo_textured_accepted=textured_ok,
+            vo_textured_convergence_pct=round(100.0 * textured_ok / len(textured), 2) if textured else None,
         )
 
     def kitti(self) -> dict:

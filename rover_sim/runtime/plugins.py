@@ -41,8 +41,12 @@ from rover_sim.errors import PluginError
 from rover_sim.scenario.nav_spec import BUILTIN, PlannerSpec, StereoSpec, VoSpec
 
 ENTRY_POINT_GROUP = "rover_sim.plugins"
-PROTOCOLS: dict[str, type] = {"vo": VisualOdometer, "stereo": StereoMatcher, "planner": Planner,
-                              "globalloc": GlobalLocalizer}
+PROTOCOLS: dict[str, type] = {
+    "vo": VisualOdometer,
+    "stereo": StereoMatcher,
+    "planner": Planner,
+    "globalloc": GlobalLocalizer,
+}
 
 
 def resolve(spec: str) -> Any:

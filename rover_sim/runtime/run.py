@@ -145,8 +145,9 @@ def run_scenario(
     import time
 
     with interrupts.sigterm_raises():
-        return _run(scenario, out_dir, seed, overrides, record, progress, reraise_interrupt, time.perf_counter(),
-                    attach)
+        return _run(
+            scenario, out_dir, seed, overrides, record, progress, reraise_interrupt, time.perf_counter(), attach
+        )
 
 
 def _run(

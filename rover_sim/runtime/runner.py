@@ -206,6 +206,7 @@ class Mission(RunRecording):
                 self.vo_update()
         elif isinstance(cmd, GotoCmd):
             self.goto(cmd)
+            self.evaluator.site(self.world.truth_pose(), self.onboard.dead_reckoning.pose, self.onboard.pose)
         elif isinstance(cmd, AutonavCmd):
             from rover_sim.apps.autonav import run_autonav  # autonav drives this class: imported at use
 
@@ -371,6 +372,7 @@ class Mission(RunRecording):
         camera = self.sc.nav.camera
         no_texture = seek_texture(self) if self.sc.nav.vo.seek_texture else False
         frame = self.world.render(camera)
+        textured = self.world.textured_view_fraction(camera)  # truth: for the evaluator only
         obs = self.world.observation_with([], [], {camera: frame})
         self.notify_images(obs)
         out = self.onboard.vo_step(obs, camera)
@@ -379,6 +381,7 @@ class Mission(RunRecording):
         record = self.evaluator.vo_step(
             self.world.truth_pose(), res.status, res.motion_rover, out.commanded_m, int(res.n_inliers), out.ms,
             reason=str(getattr(res, "reason", "")), no_texture=no_texture, covariance=getattr(res, "covariance", None),
+            textured_frac=textured,
         )  # fmt: skip
         t = self.sim.time_s
         if record is not None:

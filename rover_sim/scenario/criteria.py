@@ -38,11 +38,11 @@ class PassSpec(Spec):
     min_dr_error_pct: float | None = Field(None, ge=0.0, le=1000.0)
     max_dr_error_pct: float | None = Field(None, gt=0.0, le=1000.0)
     min_vo_convergence_pct: float | None = Field(None, ge=0.0, le=100.0)
-    justified_refusals: bool = Field(
-        False,
-        description="min_vo_convergence_pct counts only steps where some pointing had texture: a refusal logged as "
-        "'no pointing had texture' is justified (featureless ground, issue #17).",
-    )
+    min_vo_textured_convergence_pct: float | None = Field(
+        None, ge=0.0, le=100.0,
+        description="VO convergence over the textured steps: both pairs of the step see >= 50 % textured ground "
+        "(judged from truth by the evaluator; a refusal is never convergence).",
+    )  # fmt: skip
     min_max_slip_pct: float | None = Field(None, ge=0.0, le=500.0)
     max_max_slip_pct: float | None = Field(None, ge=0.0, le=500.0)
     max_false_positives: int | None = Field(None, ge=0, le=1000)
@@ -51,6 +51,11 @@ class PassSpec(Spec):
         False, description="At a keep-out halt, dead reckoning alone still believes the rover outside the zone."
     )
     goal_within_m: float | None = Field(None, gt=0.0, le=100.0, description="Truth within this of the last goal.")
+    max_site_error_vs_dr: float | None = Field(
+        None, gt=0.0, le=1.0,
+        description="The onboard pose's mean horizontal error at the sites (the end of every goto) is at most this "
+        "fraction of dead reckoning's (dead reckoning alone scores 1).",
+    )  # fmt: skip
     max_body_collisions: int | None = Field(
         None, ge=0, le=1000, description="Ticks with the body touching anything, or any part touching a rock >= 25 cm."
     )

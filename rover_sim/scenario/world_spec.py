@@ -88,7 +88,9 @@ class FaultSpec(Spec):
 
 class PhysicsSpec(Spec):
     timestep_s: float = Field(
-        0.005, ge=0.0005, le=0.01,
+        0.005,
+        ge=0.0005,
+        le=0.01,
         description="Physics step, s. 0.005 is the step the soil law was calibrated at (every catalogue scenario); a "
         "coarser step trades slip accuracy for speed (README: Speed of long drives).",
     )

@@ -122,9 +122,7 @@ class ImuParams:
 class ImuModel:
     """Adds LN-200-class errors to true body rates and specific forces; stateful (the gyro bias wanders)."""
 
-    def __init__(
-        self, params: ImuParams | None = None, seed: int = 0, errors: OdometryErrors | None = None
-    ) -> None:
+    def __init__(self, params: ImuParams | None = None, seed: int = 0, errors: OdometryErrors | None = None) -> None:
         self.params = params or ImuParams()
         self.errors = errors or OdometryErrors.none()
         self._rng = np.random.default_rng(seed)

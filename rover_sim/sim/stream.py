@@ -54,7 +54,7 @@ class TerrainStreamer:
     """Re-centres a compiled model's heightfield window (and rock pool) on the rover's tile."""
 
     def __init__(self, recipe: TerrainRecipe, seed: int) -> None:
-        self.site = StreamedSite(recipe, seed, cache_tiles=4 * recipe.streamed.window_tiles ** 2)
+        self.site = StreamedSite(recipe, seed, cache_tiles=4 * recipe.streamed.window_tiles**2)
         self.rock_slots = recipe.streamed.rock_slots
         self.recentres = 0
         self.rocks_dropped = 0  # rocks beyond the slot pool in some window (the smallest are left out)

@@ -121,8 +121,6 @@ class WheelSoilState:
     in_contact: np.ndarray  # (6,) bool
 
 
-
-
 class WheelSoilLaw:
     """Wheel–soil force law for ``n_wheels`` wheels of radius ``radius_m`` and width ``width_m``.
 

@@ -56,7 +56,15 @@ from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_tab
 from rover_sim.sim.wr_kernel import table_lookup, wr_wheels
 
 __all__ = [
-    "BEDROCK", "DRIFT", "MATERIALS", "MIXED", "SAND", "SoilParams", "WheelParams", "WheelSoilLaw", "WheelSoilState",
+    "BEDROCK",
+    "DRIFT",
+    "MATERIALS",
+    "MIXED",
+    "SAND",
+    "SoilParams",
+    "WheelParams",
+    "WheelSoilLaw",
+    "WheelSoilState",
 ]
 
 # Loose Martian sand. Inside the published ranges (REFERENCE.md section 2: c 0.2-1 kPa, phi 28-37 deg, K 1-2.5 cm,

@@ -20,6 +20,7 @@ from nav.camera import StereoRig
 from nav.geometry import R_to_quat_wxyz
 from nav.rectify import StereoCalibration
 from nav.trajectory import Pose
+from rover_sim.render.cameras import camera_world_pose
 from rover_sim.render.config import ImageNoise, RenderConfig
 from rover_sim.render.renderer import StereoFrame, StereoRenderer, terrain_texture
 from rover_sim.scenario.schema import Scenario
@@ -35,6 +36,8 @@ from terrains import Terrain, synthesize, texture_rgb_u8
 MAX_TEXTURE_SIDE_PX = 8192  # ground texture memory stays under ~200 MB
 RELIEF_REBAKE_DEG = 3.0  # re-shade the soil's micro-relief when the sun has moved more than this (12 min of sun)
 SETTLE_S = 1.0  # the rover settles on the terrain before the run starts
+VIEW_SAMPLES = 16  # textured_view_fraction: a 16 x 16 grid of pixel rays
+VIEW_MAX_RANGE_M, VIEW_RAY_STEP_M = 30.0, 0.05  # ... marched this far along each ray in steps of this
 
 
 class WindowPainter:
@@ -50,7 +53,11 @@ class WindowPainter:
     def __call__(self, window: Terrain) -> np.ndarray:
         sun = self.sun_direction if self.multiscale else None
         albedo = self.streamer.site.window_albedo(
-            window, self.px_per_m, self.contrast, multiscale=self.multiscale, sun_direction=sun  # type: ignore[arg-type]
+            window,
+            self.px_per_m,
+            self.contrast,
+            multiscale=self.multiscale,
+            sun_direction=sun,  # type: ignore[arg-type]
         )
         return texture_rgb_u8(albedo)
 
@@ -269,6 +276,38 @@ class World:
     # ------------------------------------------------------------------ ground truth (never onboard)
     def truth_pose(self) -> Pose:
         return Pose(self.sim.time_s, self.sim.position_m(), self.sim.quat_wxyz())
+
+    def ground_view_xy_m(self, camera: str) -> np.ndarray:
+        """Truth, for the evaluator: (N, 2) world xy where a ``VIEW_SAMPLES`` x ``VIEW_SAMPLES`` grid of pixel rays
+        of the left camera of ``camera``'s pair (pinhole, at its true pose now) first meets the ground heightfield
+        (rocks ignored), marched ``VIEW_RAY_STEP_M`` at a time; rays meeting no ground within
+        ``VIEW_MAX_RANGE_M`` (sky, far field) are left out."""
+        name = f"{camera}_left"
+        cam = self.renderer.camera(name)
+        T = camera_world_pose(self.sim.model, self.sim.data, name)
+        u = (np.arange(VIEW_SAMPLES) + 0.5) * cam.width_px / VIEW_SAMPLES
+        v = (np.arange(VIEW_SAMPLES) + 0.5) * cam.height_px / VIEW_SAMPLES
+        rays = cam.ray(np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)) @ T[:3, :3].T
+        t = np.arange(VIEW_RAY_STEP_M, VIEW_MAX_RANGE_M, VIEW_RAY_STEP_M)
+        pts = T[:3, 3] + t[:, None, None] * rays[None]  # (steps, rays, 3)
+        below = pts[..., 2] <= self.terrain.height_at(pts[..., 0], pts[..., 1])
+        hit = below.any(axis=0)
+        return pts[below.argmax(axis=0)[hit], np.flatnonzero(hit), :2]
+
+    def textured_view_fraction(self, camera: str) -> float:
+        """Truth, for the evaluator: the fraction of :meth:`ground_view_xy_m` on textured ground. Without
+        ``appearance.fine_soil`` all ground is ordinary, textured soil (1.0); with it, only the scenario's
+        ``texture_patches`` discs are (the scenario says where texture exists). 0.0 when no ray meets ground."""
+        ap = self.scenario.appearance
+        if not ap.fine_soil:
+            return 1.0
+        xy = self.ground_view_xy_m(camera)
+        if not len(xy):
+            return 0.0
+        on = np.zeros(len(xy), dtype=bool)
+        for p in ap.texture_patches:
+            on |= np.hypot(xy[:, 0] - p.x_m, xy[:, 1] - p.y_m) <= p.radius_m
+        return float(on.mean())
 
     def start_pose(self) -> Pose:
         """The operator-given start pose of the drive (from the previous localisation and sun finding)."""

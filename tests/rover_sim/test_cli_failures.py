@@ -265,4 +265,3 @@ def test_junit_writer(tmp_path):
     assert cases["a"].find("failure") is None
     assert cases["b"].find("failure").get("message") == "VO error 4 % > 3 %"
     assert cases["c"].find("error") is not None
-

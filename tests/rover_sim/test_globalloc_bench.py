@@ -12,7 +12,7 @@ from rover_sim.bench.globalloc import Stop, draw_prior, run_stop, summarise
 from rover_sim.bench.globalloc_sites import TERRAINS, stops_xy_yaw
 from rover_sim.cli.orbital import parse_seeds
 from rover_sim.errors import ConfigError, PluginError
-from rover_sim.runtime.acceptance import GLOBALLOC, judge_globalloc
+from rover_sim.runtime.acceptance.bars import GLOBALLOC, judge_globalloc
 from rover_sim.runtime.plugins import make_global_localizer
 
 

@@ -171,4 +171,3 @@ def test_installed_packages_register_plugins_by_entry_point(user_module, monkeyp
     spec = load_scenario("wopmay").nav.vo.model_copy(update={"impl": "refusing_vo"})
     vo = make_vo(spec)
     assert type(vo.impl).__name__ == "RefusingVO"
-

@@ -76,8 +76,6 @@ def test_rigid_run_logs_no_ground_tiles():
         RutLog(sim, TileSpy())
 
 
-
-
 class MissionSpy(TileSpy):
     def __init__(self) -> None:
         super().__init__()

@@ -13,9 +13,7 @@ from rover_sim.sim.terramechanics import WheelSoilLaw
 N = 6
 
 
-def random_sensor_block(
-    rng: np.random.Generator, max_load_n: float = 300.0, contact_span_m: float = 3.0
-) -> np.ndarray:
+def random_sensor_block(rng: np.random.Generator, max_load_n: float = 300.0, contact_span_m: float = 3.0) -> np.ndarray:
     """One sensor block (models/mer/rover.xml layout): some wheels off the ground, some held, some reversing
     (shared with test_wr_kernel.py)."""
     contact = np.zeros((N, 7))

@@ -151,12 +151,15 @@ def test_bench_stereo_refuses_an_unknown_profile() -> None:
 
 
 def test_a_matcher_that_returns_nothing_does_not_beat_stereobm() -> None:
-    from rover_sim.bench.stereo import beats_stereobm
+    from rover_sim.runtime.acceptance.bars import stereo_verdict
 
-    bm = {"stereobm_bad1": 0.0031, "stereobm_density": 0.87}
-    assert beats_stereobm(bm | {"ours_bad1": 0.0014, "ours_density": 0.927})
-    assert not beats_stereobm(bm | {"ours_bad1": 0.0, "ours_density": 0.0})  # no disparity at all
-    assert not beats_stereobm(bm | {"ours_bad1": 0.0040, "ours_density": 0.95})
+    bm = {"stereobm_bad1": 0.0031, "stereobm_density": 0.87, "ratio": 1.2, "ratio_1024": 1.4, "engines_agree": True}
+    assert stereo_verdict(bm | {"ours_bad1": 0.0014, "ours_density": 0.927}).passed
+    nothing = stereo_verdict(bm | {"ours_bad1": 0.0, "ours_density": 0.0})  # no disparity at all
+    assert not nothing.passed and nothing.reasons == ["density 0.0 % < StereoBM 87.0 %"]
+    assert not stereo_verdict(bm | {"ours_bad1": 0.0040, "ours_density": 0.95}).passed
+    slow = stereo_verdict(bm | {"ours_bad1": 0.0014, "ours_density": 0.927, "ratio_1024": 1.6})
+    assert slow.reasons == ["speed ratio to StereoBM @1024 px 1.60 > 1.5"]
 
 
 @pytest.mark.render

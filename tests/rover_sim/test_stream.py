@@ -22,8 +22,9 @@ def _recipe(cover: float = 0.0) -> TerrainRecipe:
         slope=SlopeSpec(slope_deg=3.0, azimuth_deg=30.0),
         roughness=RoughnessSpec(rms_m=0.01, correlation_length_m=1.0),
         rocks=RockSpec(cover_fraction=cover, min_height_m=0.05, max_height_m=0.3, exclusion_zones=[]),
-        streamed=StreamSpec(tile_m=TILE_M, window_tiles=3, rock_slots=16, hill_amplitude_m=0.5,
-                            crater_density_per_km2=30.0),  # fmt: skip
+        streamed=StreamSpec(
+            tile_m=TILE_M, window_tiles=3, rock_slots=16, hill_amplitude_m=0.5, crater_density_per_km2=30.0
+        ),  # fmt: skip
     )
 
 
@@ -150,8 +151,9 @@ def _rock_drive(midphase: bool, seconds: float = 30.0) -> tuple[np.ndarray, np.n
     import mujoco
 
     recipe = _recipe(cover=0.25)
-    recipe = recipe.model_copy(update={"streamed": recipe.streamed.model_copy(update={"tile_m": 2.0,
-                                                                                      "rock_slots": 64})})
+    recipe = recipe.model_copy(
+        update={"streamed": recipe.streamed.model_copy(update={"tile_m": 2.0, "rock_slots": 64})}
+    )
     st = TerrainStreamer(recipe, seed=5)
     sim = RoverSim(st.initial_window(0.5, 0.0), streamer=st)
     if not midphase:

@@ -51,9 +51,7 @@ def test_fine_soil_is_nearly_featureless() -> None:
 
 
 def test_bedrock_has_more_contrast_than_sand_and_mixed_is_between() -> None:
-    stds = {
-        kind: albedo_texture(_terrain(kind), 100.0, seed=0).std() for kind in ("sand", "mixed", "bedrock")
-    }
+    stds = {kind: albedo_texture(_terrain(kind), 100.0, seed=0).std() for kind in ("sand", "mixed", "bedrock")}
     assert stds["sand"] < stds["mixed"] < stds["bedrock"]
 
 

@@ -20,9 +20,7 @@ from terrains import (
 )
 
 
-def _plane(
-    a: float = 0.3, b: float = -0.2, c: float = 1.5, shape: tuple[int, int] = (31, 41), cell: float = 0.1
-):
+def _plane(a: float = 0.3, b: float = -0.2, c: float = 1.5, shape: tuple[int, int] = (31, 41), cell: float = 0.1):
     nrow, ncol = shape
     xs = (np.arange(ncol) - (ncol - 1) / 2) * cell
     ys = (np.arange(nrow) - (nrow - 1) / 2) * cell
@@ -79,9 +77,7 @@ def test_save_load_round_trip_is_exact(tmp_path: Path) -> None:
         cell_size_m=0.1,
         slope=SlopeSpec(slope_deg=15),
         rocks=RockSpec(cover_fraction=0.2),
-        explicit_rocks=[
-            {"name": "Wopmay", "x_m": 1.0, "y_m": 1.0, "length_m": 1.5, "width_m": 0.9, "height_m": 0.6}
-        ],
+        explicit_rocks=[{"name": "Wopmay", "x_m": 1.0, "y_m": 1.0, "length_m": 1.5, "width_m": 0.9, "height_m": 0.6}],
         material=MaterialSpec(kind="patches"),
     )
     t = synthesize(recipe, 42)

@@ -99,9 +99,7 @@ def test_grid_limits() -> None:
 
 def test_too_many_rocks_is_an_error_that_says_what_to_change() -> None:
     with pytest.raises(ValidationError, match="min_height_m"):
-        TerrainRecipe(
-            size_m=(500, 500), cell_size_m=0.5, rocks=RockSpec(cover_fraction=0.5, min_height_m=0.02)
-        )
+        TerrainRecipe(size_m=(500, 500), cell_size_m=0.5, rocks=RockSpec(cover_fraction=0.5, min_height_m=0.02))
 
 
 def test_recipe_json_round_trip() -> None:

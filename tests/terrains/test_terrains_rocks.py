@@ -81,9 +81,7 @@ def test_footprint_extents_follow_length_width_and_yaw() -> None:
     assert np.ptp(outline[:, 0]) == pytest.approx(rock.width_m, rel=1e-2)
     tet = _rock("tetrahedron", yaw_rad=0.0)
     tri = tet.footprint_xy_m()
-    assert np.ptp(tri[:, 0]) == pytest.approx(tet.length_m) and np.ptp(tri[:, 1]) == pytest.approx(
-        tet.width_m
-    )
+    assert np.ptp(tri[:, 0]) == pytest.approx(tet.length_m) and np.ptp(tri[:, 1]) == pytest.approx(tet.width_m)
     np.testing.assert_allclose(tri.mean(axis=0), [tet.x_m, tet.y_m], atol=1e-12)  # centre = centroid
 
 
@@ -178,10 +176,7 @@ def test_rock_heights_are_about_half_the_diameter_and_clipped() -> None:
 
 def test_no_cover_no_rocks() -> None:
     assert (
-        synthesize(
-            TerrainRecipe(size_m=(10, 10), cell_size_m=0.2, rocks=RockSpec(cover_fraction=0.0)), 0
-        ).rocks
-        == []
+        synthesize(TerrainRecipe(size_m=(10, 10), cell_size_m=0.2, rocks=RockSpec(cover_fraction=0.0)), 0).rocks == []
     )
 
 
@@ -198,9 +193,7 @@ def test_rocks_do_not_overlap_and_respect_exclusion_zones() -> None:
         assert math.hypot(a.x_m - b.x_m, a.y_m - b.y_m) >= a.footprint_radius_m + b.footprint_radius_m - 1e-9
     for rock in t.rocks[1:]:
         for z in zones:
-            assert (
-                math.hypot(rock.x_m - z.x_m, rock.y_m - z.y_m) >= z.radius_m + rock.footprint_radius_m - 1e-9
-            )
+            assert math.hypot(rock.x_m - z.x_m, rock.y_m - z.y_m) >= z.radius_m + rock.footprint_radius_m - 1e-9
         assert abs(rock.x_m) + rock.footprint_radius_m <= t.half_x_m + 1e-9
         assert abs(rock.y_m) + rock.footprint_radius_m <= t.half_y_m + 1e-9
     assert len({r.name for r in t.rocks}) == len(t.rocks)

@@ -32,9 +32,7 @@ def _busy_recipe() -> TerrainRecipe:
         ripples=RippleSpec(amplitude_m=0.1, wavelength_m=2.0, sinuosity=0.3),
         craters=[CraterSpec(center_xy_m=(3.0, 1.0), diameter_m=6.0)],
         rocks=RockSpec(cover_fraction=0.1),
-        explicit_rocks=[
-            {"name": "Wopmay", "x_m": -3.0, "y_m": 2.0, "length_m": 1.5, "width_m": 0.9, "height_m": 0.6}
-        ],
+        explicit_rocks=[{"name": "Wopmay", "x_m": -3.0, "y_m": 2.0, "length_m": 1.5, "width_m": 0.9, "height_m": 0.6}],
         material=MaterialSpec(kind="patches", outcrop_slope_deg=30.0),
     )
 
@@ -76,9 +74,7 @@ def test_adding_a_layer_leaves_the_others_alone() -> None:
     ]
 
 
-@pytest.mark.parametrize(
-    ("slope_deg", "azimuth_deg"), [(0.0, 0.0), (17.0, 0.0), (20.0, 135.0), (31.0, -60.0)]
-)
+@pytest.mark.parametrize(("slope_deg", "azimuth_deg"), [(0.0, 0.0), (17.0, 0.0), (20.0, 135.0), (31.0, -60.0)])
 def test_planar_slope_has_the_commanded_slope_and_azimuth(slope_deg: float, azimuth_deg: float) -> None:
     recipe = TerrainRecipe(
         size_m=(8, 6),
@@ -100,14 +96,10 @@ def test_planar_slope_has_the_commanded_slope_and_azimuth(slope_deg: float, azim
     np.testing.assert_allclose(t.slope_deg_at(gx, gy), slope_deg, atol=1e-9)
 
 
-@pytest.mark.parametrize(
-    ("diameter_m", "d_over_d", "flat"), [(20.0, 0.2, 0.0), (20.0, 0.12, 0.3), (8.0, 0.25, 0.0)]
-)
+@pytest.mark.parametrize(("diameter_m", "d_over_d", "flat"), [(20.0, 0.2, 0.0), (20.0, 0.12, 0.3), (8.0, 0.25, 0.0)])
 def test_crater_depth_and_rim(diameter_m: float, d_over_d: float, flat: float) -> None:
     """Eagle-sized bowls: rim-to-floor depth is d/D x D, the rim stands above the surroundings."""
-    crater = CraterSpec(
-        diameter_m=diameter_m, depth_to_diameter=d_over_d, rim_height_frac=0.036, floor_flatness=flat
-    )
+    crater = CraterSpec(diameter_m=diameter_m, depth_to_diameter=d_over_d, rim_height_frac=0.036, floor_flatness=flat)
     recipe = TerrainRecipe(size_m=(40, 40), cell_size_m=0.1, craters=[crater], roughness=FLAT, rocks=NO_ROCKS)
     t = synthesize(recipe, 0)
     radius = diameter_m / 2
@@ -134,9 +126,7 @@ def test_large_crater_window_sits_on_the_wall() -> None:
     """An Endurance-sized bowl (130 m) seen through a 10 m patch on its inner wall slopes toward the
     centre."""
     crater = CraterSpec(center_xy_m=(-45.0, 0.0), diameter_m=130.0, depth_to_diameter=0.15)
-    t = synthesize(
-        TerrainRecipe(size_m=(10, 10), cell_size_m=0.1, craters=[crater], roughness=FLAT, rocks=NO_ROCKS), 0
-    )
+    t = synthesize(TerrainRecipe(size_m=(10, 10), cell_size_m=0.1, craters=[crater], roughness=FLAT, rocks=NO_ROCKS), 0)
     assert t.heights_m[:, -1].mean() > t.heights_m[:, 0].mean()
     assert 10.0 < float(t.slope_deg_at(0.0, 0.0)) < 40.0
 
@@ -164,9 +154,7 @@ def test_rougher_hurst_has_more_short_scale_relief() -> None:
 
 def test_ripples_amplitude_wavelength_and_asymmetry() -> None:
     ripple = RippleSpec(amplitude_m=0.2, wavelength_m=2.0, azimuth_deg=0.0, sharpness=0.8, sinuosity=0.0)
-    t = synthesize(
-        TerrainRecipe(size_m=(20, 4), cell_size_m=0.02, ripples=ripple, roughness=FLAT, rocks=NO_ROCKS), 0
-    )
+    t = synthesize(TerrainRecipe(size_m=(20, 4), cell_size_m=0.02, ripples=ripple, roughness=FLAT, rocks=NO_ROCKS), 0)
     row = t.heights_m[t.nrow // 2]
     assert np.ptp(row) == pytest.approx(0.4, rel=0.01)
     np.testing.assert_allclose(t.heights_m, np.broadcast_to(row, t.heights_m.shape))  # crests run north-south
@@ -196,9 +184,7 @@ def test_patch_materials_hit_the_requested_fractions() -> None:
 
 @pytest.mark.parametrize("kind", ["sand", "bedrock", "mixed"])
 def test_uniform_materials(kind: str) -> None:
-    t = synthesize(
-        TerrainRecipe(size_m=(4, 4), cell_size_m=0.1, material=MaterialSpec(kind=kind), rocks=NO_ROCKS), 0
-    )
+    t = synthesize(TerrainRecipe(size_m=(4, 4), cell_size_m=0.1, material=MaterialSpec(kind=kind), rocks=NO_ROCKS), 0)
     assert np.unique(t.materials).tolist() == [int(Material[kind.upper()])]
 
 

@@ -1,8 +1,11 @@
-"""Every pass criterion in one place: the scenario judge and the benchmarks' acceptance bars.
+"""The one judge: every pass criterion and benchmark bar, and the verdicts built from them.
 
 A scenario's own criteria live in its ``[pass]`` table (:class:`rover_sim.scenario.criteria.PassSpec`) and are
-judged by :func:`judge`; the benchmarks' bars are the constants below (each with the issue or paper it comes from).
-The CLI and the benchmark modules read them from here and nowhere else.
+judged by :func:`scenario_verdict`; over seeds by :func:`judge_distribution`; the statistical regression gate's
+rules are :data:`GATE`. Each benchmark's bars are the typed constants of :mod:`rover_sim.runtime.acceptance.bars`,
+judged by its ``*_verdict`` function there. A :class:`Verdict` holds every check (name, pass, the measured value, the
+bar, and why it failed); the console tables, the JSON's ``passed`` / ``reasons``, the JUnit cases
+(:mod:`rover_sim.bench.junit_cases`) and the exit status are all derived from it, in this package and nowhere else.
 """
 
 from __future__ import annotations
@@ -13,133 +16,107 @@ from dataclasses import dataclass
 
 from rover_sim.runtime.evaluator import FALSE_POSITIVE_FRACTION as EVAL_FALSE_POSITIVE_FRACTION
 from rover_sim.runtime.evaluator import FALSE_POSITIVE_M as EVAL_FALSE_POSITIVE_M
-from rover_sim.runtime.evaluator import MIN_DISTANCE_FOR_PCT_M, Metrics
+from rover_sim.runtime.evaluator import MIN_DISTANCE_FOR_PCT_M, TEXTURED_VIEW_FRAC, Metrics
 from rover_sim.scenario.commands import KeepOut
 from rover_sim.scenario.criteria import DistributionSpec, PassSpec
 
 TALL_ROCK_M = 0.25  # GESTALT must avoid touching rocks at least this tall (wheel or body)
 FALSE_POSITIVE_M = EVAL_FALSE_POSITIVE_M  # false positive: error > max(this, FALSE_POSITIVE_FRACTION x step)
 FALSE_POSITIVE_FRACTION = EVAL_FALSE_POSITIVE_FRACTION
+RUN_DID_NOT_COMPLETE = "run did not complete"
 
 
 @dataclass(frozen=True)
-class AutonavBar:
-    """``bench autonav``: reach the goal on >= 95 % of fields, never touch a tall rock, plan within 50 ms."""
+class Check:
+    """One bar: ``why`` is the unmet bar with the measured value (empty when it passed)."""
 
-    min_reached_frac: float = 0.95
-    max_collisions: int = 0
-    max_cycle_ms: float = 50.0
+    name: str
+    passed: bool
+    why: str = ""
+    measured: str = ""
+    bar: str = ""
 
-
-@dataclass(frozen=True)
-class StereoBar:
-    """``bench stereo``: at most 1.5x StereoBM's time, fewer bad-1px pixels than StereoBM."""
-
-    max_time_ratio: float = 1.5
-
-
-@dataclass(frozen=True)
-class RenderBar:
-    """``bench render``: a 256x256 navcam pair with shadows within 40 ms."""
-
-    max_pair_256_shadows_ms: float = 40.0
+    def cell(self) -> str:
+        """A console table's ok cell: ``yes`` or ``NO: why``."""
+        return pass_cell(self.passed, self.why or self.name)
 
 
 @dataclass(frozen=True)
-class DimesBar:
-    """``bench dimes``: 1-sigma horizontal velocity error <= 1.5 m/s (MER DIMES requirement), >= 50 descents, of
-    which >= 90 % give an accepted estimate (issue #17: one accepted descent of 50 must not pass)."""
+class Verdict:
+    """Every check of one run or benchmark; ``error``: it did not run to completion (a run error, interrupted)."""
 
-    max_velocity_error_1sigma_m_s: float = 1.5
-    min_runs: int = 50
-    min_accepted_frac: float = 0.90
+    checks: tuple[Check, ...] = ()
+    error: str | None = None
 
+    @property
+    def passed(self) -> bool:
+        return self.error is None and all(c.passed for c in self.checks)
 
-@dataclass(frozen=True)
-class RocksBar:
-    """``bench rocks`` (seed 004): extraction, modelling, matching and site-to-site error."""
+    @property
+    def reasons(self) -> list[str]:
+        return ([self.error] if self.error else []) + [c.why or c.name for c in self.checks if not c.passed]
 
-    recall: float = 0.90
-    precision: float = 0.90
-    median_rms_m: float = 0.04
-    match_correct_frac: float = 0.90
-    site_error_pct: float = 2.0
-    model_type_match_frac_well_observed: float = 0.80
+    @property
+    def reason(self) -> str:
+        return "; ".join(self.reasons) or "all criteria met"
 
-
-@dataclass(frozen=True)
-class SweepBar:
-    """``bench sweep``: two workers take at most 0.65 of the serial wall time."""
-
-    max_parallel_ratio: float = 0.65
+    def cell(self) -> str:
+        """A console table's pass cell: ``yes`` or ``NO: <reasons>``."""
+        return pass_cell(self.passed, self.reason)
 
 
-@dataclass(frozen=True)
-class GlobalLocBar:
-    """``bench globalloc``: on rocky plains and crater rims >= 95 % of stops fixed within ``false_fix_m``, median
-    error <= 0.25 m, 90th percentile <= 0.5 m, <= 30 s of CPU per fix (Perseverance's Mars Global Localization:
-    ~25 cm in ~2 min); on every terrain no false fix (accepted and more than 1 m off); >= 40 stops over >= 8 seeds
-    per terrain."""
-
-    fixed_terrains: tuple[str, ...] = ("rocky_plains", "crater_rim")
-    min_fixed_frac: float = 0.95
-    max_median_error_m: float = 0.25
-    max_p90_error_m: float = 0.5
-    max_false_fixes: int = 0
-    false_fix_m: float = 1.0
-    max_compute_s: float = 30.0
-    min_stops: int = 40
-    min_seeds: int = 8
+def check(name: str, ok: bool, why: str, measured: str = "", bar: str = "") -> Check:
+    return Check(name, bool(ok), "" if ok else why, measured, bar)
 
 
-AUTONAV = AutonavBar()
-STEREO = StereoBar()
-RENDER = RenderBar()
-DIMES = DimesBar()
-ROCKS = RocksBar()
-SWEEP = SweepBar()
-GLOBALLOC = GlobalLocBar()
+def at_least(name: str, value: float | None, bar: float, fmt: str = "{:g}", op: str = ">=") -> Check:
+    """``value >= bar`` (``op="<="``: at most); ``fmt`` formats both, with their unit; None (not measured) fails."""
+    text, bar_text = "not measured" if value is None else fmt.format(value), f"{op} {fmt.format(bar)}"
+    ok = value is not None and (value >= bar if op == ">=" else value <= bar)
+    return check(name, ok, f"{name} {text} (need {bar_text})", text, bar_text)
+
+
+def at_most(name: str, value: float | None, bar: float, fmt: str = "{:g}") -> Check:
+    return at_least(name, value, bar, fmt, "<=")
+
+
+def pass_cell(passed: bool, reason: str) -> str:
+    """``yes``, or ``NO: <reason>`` (every failing console row says why)."""
+    return "yes" if passed else f"NO: {reason}"
+
+
+DESCRIBE = (  # PassSpec field -> how describe() words it
+    ("max_vo_error_pct", "VO <= {:g} %"), ("min_dr_error_pct", "DR >= {:g} %"), ("max_dr_error_pct", "DR <= {:g} %"),
+    ("min_vo_convergence_pct", "convergence >= {:g} %"),
+    ("min_vo_textured_convergence_pct", "convergence on textured steps >= {:g} %"),
+    ("min_max_slip_pct", "slip >= {:g} %"), ("max_max_slip_pct", "slip <= {:g} %"),
+    ("max_false_positives", "{} false positives"), ("expect_halt", "{} halt"), ("goal_within_m", "goal within {:g} m"),
+    ("max_site_error_vs_dr", "site error <= {:g} x DR's"), ("max_body_collisions", "<= {} collisions"),
+    ("min_final_sinkage_m", "final sinkage >= {:g} m"), ("max_final_sinkage_m", "final sinkage <= {:g} m"),
+    ("min_final_slip_pct", "final slip >= {:g} %"),
+)  # fmt: skip
 
 
 def describe(p: PassSpec) -> str:
     """The scenario's criteria as one line (for benchmark tables)."""
-    parts = []
-    if p.max_vo_error_pct is not None:
-        parts.append(f"VO <= {p.max_vo_error_pct:g} %")
-    if p.min_dr_error_pct is not None:
-        parts.append(f"DR >= {p.min_dr_error_pct:g} %")
-    if p.max_dr_error_pct is not None:
-        parts.append(f"DR <= {p.max_dr_error_pct:g} %")
-    if p.min_vo_convergence_pct is not None:
-        alt = " or justified refusal" if p.justified_refusals else ""
-        parts.append(f"convergence >= {p.min_vo_convergence_pct:g} %{alt}")
-    if p.min_max_slip_pct is not None:
-        parts.append(f"slip >= {p.min_max_slip_pct:g} %")
-    if p.max_max_slip_pct is not None:
-        parts.append(f"slip <= {p.max_max_slip_pct:g} %")
-    if p.max_false_positives is not None:
-        parts.append(f"{p.max_false_positives} false positives")
-    if p.expect_halt is not None:
-        parts.append(f"{p.expect_halt} halt")
-    if p.goal_within_m is not None:
-        parts.append(f"goal within {p.goal_within_m:g} m")
-    if p.max_body_collisions is not None:
-        parts.append(f"<= {p.max_body_collisions} collisions")
-    if p.min_final_sinkage_m is not None:
-        parts.append(f"final sinkage >= {p.min_final_sinkage_m:g} m")
-    if p.max_final_sinkage_m is not None:
-        parts.append(f"final sinkage <= {p.max_final_sinkage_m:g} m")
-    if p.min_final_slip_pct is not None:
-        parts.append(f"final slip >= {p.min_final_slip_pct:g} %")
+    parts = [fmt.format(v) for key, fmt in DESCRIBE if (v := getattr(p, key)) is not None]
     return ", ".join(parts) or "runs to completion"
 
 
 def judge(
     m: Metrics, p: PassSpec, *, error: str | None, keep_out_info: dict | None, keep_out: list[KeepOut]
 ) -> tuple[bool, str]:
-    """Pass/fail of one run against its scenario's ``[pass]`` criteria; the reason names every unmet bound."""
+    """Pass/fail of one run and the reason naming every unmet bound (:func:`scenario_verdict`)."""
+    v = scenario_verdict(m, p, error=error, keep_out_info=keep_out_info, keep_out=keep_out)
+    return v.passed, v.reason
+
+
+def scenario_verdict(
+    m: Metrics, p: PassSpec, *, error: str | None, keep_out_info: dict | None, keep_out: list[KeepOut]
+) -> Verdict:
+    """One run against its scenario's ``[pass]`` criteria: one check per unmet bound, naming it."""
     if error:
-        return False, f"run did not complete: {error}"
+        return Verdict(error=f"{RUN_DID_NOT_COMPLETE}: {error}")
     fails: list[str] = []
 
     def need(ok: bool, text: str) -> None:
@@ -159,47 +136,52 @@ def judge(
     if p.max_dr_error_pct is not None and m.dr_error_pct is not None:
         need(m.dr_error_pct <= p.max_dr_error_pct, f"DR error {m.dr_error_pct} % > {p.max_dr_error_pct} %")
     if p.min_vo_convergence_pct is not None:
-        conv, what = m.vo_convergence_pct, "VO convergence"
-        if p.justified_refusals and m.vo_refusals_justified:
-            textured = m.vo_steps - m.vo_refusals_justified  # steps where some pointing had texture
-            conv = round(100.0 * m.vo_accepted / textured, 2) if textured else 100.0
-            what = f"VO convergence on textured steps ({m.vo_refusals_justified} justified refusals)"
-        need(conv is not None and conv >= p.min_vo_convergence_pct, f"{what} {conv} % < {p.min_vo_convergence_pct} %")
+        conv = m.vo_convergence_pct
+        need(conv is not None and conv >= p.min_vo_convergence_pct,
+             f"VO convergence {conv} % < {p.min_vo_convergence_pct} %")  # fmt: skip
+    if p.min_vo_textured_convergence_pct is not None:
+        conv, bar = m.vo_textured_convergence_pct, p.min_vo_textured_convergence_pct
+        need(conv is not None, f"VO convergence on textured steps not measured: no step had >= "
+             f"{100 * TEXTURED_VIEW_FRAC:.0f} % of its view on texture")  # fmt: skip
+        need(conv is None or conv >= bar, f"VO convergence on textured steps {conv} % "
+             f"({m.vo_textured_accepted}/{m.vo_textured_steps}) < {bar} %")  # fmt: skip
     if p.min_max_slip_pct is not None:
         need(m.max_slip_pct >= p.min_max_slip_pct, f"max slip {m.max_slip_pct} % < {p.min_max_slip_pct} %")
     if p.max_max_slip_pct is not None:
         need(m.max_slip_pct <= p.max_max_slip_pct, f"max slip {m.max_slip_pct} % > {p.max_max_slip_pct} %")
     if p.max_false_positives is not None:
-        need(
-            m.false_positives <= p.max_false_positives,
-            f"{m.false_positives} VO false positives > {p.max_false_positives}",
-        )
+        need(m.false_positives <= p.max_false_positives, f"{m.false_positives} VO false positives > "
+             f"{p.max_false_positives}")  # fmt: skip
     if p.expect_halt is not None:
         need(m.halted == p.expect_halt, f"expected a {p.expect_halt} halt, got {m.halted}")
     elif m.halted is not None:
         fails.append(f"unexpected {m.halted} halt")
     if p.expect_dead_reckoning_clear:
-        info = keep_out_info
-        need(
-            info is not None
-            and info["dead_reckoning_distance_m"] > info["onboard_distance_m"] + 0.1
-            and any(info["dead_reckoning_distance_m"] >= z.radius_m for z in keep_out),
-            "dead reckoning did not believe the rover clear at the keep-out halt",
-        )
+        d = None if keep_out_info is None else keep_out_info["dead_reckoning_distance_m"]
+        need(d is not None and d > keep_out_info["onboard_distance_m"] + 0.1 and any(d >= z.radius_m for z in keep_out),
+             "dead reckoning did not believe the rover clear at the keep-out halt")  # fmt: skip
     if p.goal_within_m is not None:
-        need(
-            m.goal_distance_m is not None and m.goal_distance_m <= p.goal_within_m,
-            f"ended {m.goal_distance_m} m from the goal (> {p.goal_within_m} m)",
-        )
+        g = m.goal_distance_m
+        need(g is not None and g <= p.goal_within_m, f"ended {g} m from the goal (> {p.goal_within_m} m)")
+    if p.max_site_error_vs_dr is not None:
+        _judge_sites(m.extra.get("sites"), p.max_site_error_vs_dr, need)
     if p.max_body_collisions is not None:
         need(m.body_collisions <= p.max_body_collisions, f"{m.body_collisions} body-collision ticks")
-        need(
-            m.tall_rock_contacts <= p.max_body_collisions,
-            f"{m.tall_rock_contacts} ticks touching rocks taller than {TALL_ROCK_M} m",
-        )
+        need(m.tall_rock_contacts <= p.max_body_collisions,
+             f"{m.tall_rock_contacts} ticks touching rocks taller than {TALL_ROCK_M} m")  # fmt: skip
     if p.judges_wheels():
         _judge_wheels(m.extra.get("wheels"), p, need)
-    return (not fails, "; ".join(fails) if fails else "all criteria met")
+    return Verdict(tuple(Check(text, False, text) for text in fails))
+
+
+def _judge_sites(sites: dict | None, factor: float, need: Callable[[bool, str], None]) -> None:
+    """Localisation (rock_localization): the onboard pose's mean horizontal error at the sites (goto ends) against
+    dead reckoning's; dead reckoning alone (VO off) scores exactly 1."""
+    if not sites:
+        need(False, "site errors not measured: no goto site")
+        return
+    on, dr = sites["onboard_mean_m"], sites["dead_reckoning_mean_m"]
+    need(on <= factor * dr, f"mean site error {on} m > {factor:g} x dead reckoning's {dr} m")
 
 
 def _judge_wheels(wheels: dict | None, p: PassSpec, need: Callable[[bool, str], None]) -> None:
@@ -309,28 +291,3 @@ def regressed(p_value: float, threshold: float, effect: float, metric: GateMetri
     size = abs(effect) if metric.two_sided else effect
     floor = math.log1p(metric.floor) if metric.scale == "log" else metric.floor
     return p_value <= threshold and size >= floor
-
-
-def judge_globalloc(terrains: dict[str, dict], bar: GlobalLocBar = GLOBALLOC) -> tuple[bool, list[str]]:
-    """``bench globalloc``'s verdict on one localiser's per-terrain summaries (``stops``, ``fixed``, ``success``,
-    ``false_fixes``, ``median_error_m``, ``p90_error_m``, ``compute_s_median``, ``seeds``)."""
-    reasons = []
-    for name, b in terrains.items():
-        if b["stops"] < bar.min_stops or len(b.get("seeds", [])) < bar.min_seeds:
-            reasons.append(f"{name}: {b['stops']} stops over {len(b.get('seeds', []))} seeds "
-                           f"(need >= {bar.min_stops} over >= {bar.min_seeds})")  # fmt: skip
-        if b["false_fixes"] > bar.max_false_fixes:
-            reasons.append(f"{name}: {b['false_fixes']} false fixes (> {bar.false_fix_m} m off; allowed 0)")
-        if b["compute_s_median"] is not None and b["compute_s_median"] > bar.max_compute_s:
-            reasons.append(f"{name}: median compute {b['compute_s_median']:.1f} s > {bar.max_compute_s} s")
-        if name not in bar.fixed_terrains:
-            continue
-        frac = b["success"] / max(b["stops"], 1)
-        if frac < bar.min_fixed_frac:
-            reasons.append(f"{name}: {100 * frac:.0f} % of stops fixed within {bar.false_fix_m} m "
-                           f"(< {100 * bar.min_fixed_frac:.0f} %)")  # fmt: skip
-        for key, lim in (("median_error_m", bar.max_median_error_m), ("p90_error_m", bar.max_p90_error_m)):
-            v = b[key]
-            if v is None or v > lim:
-                reasons.append(f"{name}: {key} {'not measured' if v is None else f'{v:.3f}'} (> {lim})")
-    return not reasons, reasons
