@@ -39,6 +39,20 @@ def _fail(err: Exception) -> None:
     raise typer.Exit(code=2)
 
 
+def _check_outputs(*outputs: tuple[str, Path | str | None, str]) -> None:
+    """Refuse unwritable output paths before any work: one line naming the option and the path, exit 2."""
+    from rover_sim.cli.outdir import check_outputs
+
+    try:
+        check_outputs(*outputs)
+    except RoverSimError as e:
+        _fail(e)
+
+
+def _json_junit(json: Path | None, junit: Path | None) -> None:
+    _check_outputs(("--json", json, "file"), ("--junit", junit, "file"))
+
+
 @app.command("check-gl")
 def check_gl_cmd() -> None:
     """Check that offscreen rendering (EGL) works; prints the install hint if it does not."""
@@ -74,6 +88,9 @@ def bench_slip(
     """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
     if soil_model not in ("bekker", "wong_reece"):
         _fail(ValueError(f"--soil-model must be 'bekker' or 'wong_reece', not {soil_model!r}"))
+    _json_junit(json, junit)
+    if soil_model == "wong_reece":
+        _check_outputs(("--png", png, "file"))
     with guarded():
         if soil_model == "wong_reece":
             from rover_sim.bench import mobility
@@ -93,6 +110,7 @@ def bench_slip(
 @bench_app.command("render")
 def bench_render_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
+    _json_junit(json, junit)
     with guarded():
         from rover_sim.bench.junit_cases import render_cases
         from rover_sim.bench.render import bench_render
@@ -112,6 +130,7 @@ def bench_stereo_cmd(
 ) -> None:
     """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px) at
     256x256 and 1024x1024; any --stereo plugin on the same 256 px pairs."""
+    _json_junit(json, junit)
     with guarded():
         from rover_sim.bench.junit_cases import stereo_cases
         from rover_sim.bench.stereo import bench_stereo
@@ -135,6 +154,7 @@ def bench_autonav_cmd(
     """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away); with --planner,
     --stereo or --vo the same fields run again with those parts swapped in."""
     path = str(json) if json else None
+    _json_junit(json, junit)
     with guarded():
         from rover_sim.bench.autonav import bench_autonav
         from rover_sim.bench.junit_cases import autonav_cases
@@ -164,6 +184,8 @@ def bench_traverse_cmd(
 ) -> None:
     """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
     100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
+    _json_junit(json, junit)
+    _check_outputs(("--out", out, "dir"))
     with guarded():
         from rover_sim.bench.junit_cases import traverse_cases
         from rover_sim.bench.traverse import bench_traverse
@@ -177,6 +199,7 @@ def bench_dimes_cmd(
     json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50, junit: JunitOpt = None
 ) -> None:
     """DIMES: Monte-Carlo descents over winds and terrains; horizontal velocity error and featureless rejection."""
+    _json_junit(json, junit)
     with guarded():
         from rover_sim.bench.dimes import bench_dimes
         from rover_sim.bench.junit_cases import dimes_cases
@@ -188,6 +211,7 @@ def bench_dimes_cmd(
 @bench_app.command("sweep")
 def bench_sweep_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Sweep speed: 8 short jobs serially and on a 2-worker pool (acceptance: parallel <= 0.65x serial)."""
+    _json_junit(json, junit)
     with guarded():
         from rover_sim.bench.junit_cases import sweep_cases
         from rover_sim.bench.sweep import bench_sweep
@@ -211,6 +235,7 @@ def bench_rocks_cmd(
 ) -> None:
     """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
     figures by rock class (analytic / irregular) with --irregular-fraction."""
+    _json_junit(json, junit)
     with guarded():
         from rover_sim.bench.junit_cases import rocks_cases
         from rover_sim.bench.rocks import bench_rocks
@@ -241,6 +266,7 @@ def render_cmd(
         _fail(ValueError(f"--pair {pair!r}: choose from {', '.join(pairs)}"))
     if not RENDER_PX[0] <= resolution <= RENDER_PX[1]:  # checked first: too large an offscreen buffer kills MuJoCo
         _fail(ValueError(f"--resolution {resolution}: allowed {RENDER_PX[0]}..{RENDER_PX[1]} pixels"))
+    _check_outputs(("--out", out, "dir"))
     try:
         sc = load_scenario(scenario, seed=seed)
     except RoverSimError as e:
@@ -322,6 +348,7 @@ def bench_vo_cmd(
     for c in case or []:
         if c not in VO_CASES:
             _fail(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
+    _json_junit(json, junit)
     with guarded():
         from rover_sim.bench.seeded import parse_perturb
         from rover_sim.bench.seeds import parse_seeds
@@ -397,6 +424,9 @@ def bench_suite_cmd(
     for p in profile or []:
         if p not in ("flight", "ideal"):
             _fail(ValueError(f"--profile {p!r}: choose flight or ideal"))
+    _json_junit(json, junit)
+    if update_baseline and baseline is not None:
+        _check_outputs(("--baseline", baseline, "file"))
     with guarded():
         from rover_sim.bench.seeded import parse_perturb
         from rover_sim.bench.seeds import parse_seeds
@@ -450,6 +480,7 @@ def run_cmd(
 
     if out is None:
         out, overwrite = Path("runs/latest"), True
+    _check_outputs(("--out", out, "dir"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.mission.run import run_scenario
         from rover_sim.mission.scenario import load_scenario, plugin_overrides
@@ -527,6 +558,8 @@ def sweep_cmd(
     """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
     from rover_sim.mission.sweep import run_sweep
 
+    _check_outputs(("--out", out, "dir"))
+
     def report(done: int, total: int, job, result) -> None:
         if not result.ok:
             typer.secho(f"[{done}/{total}] FAILED {job.job_id} {job.label}: {result.error}", fg=typer.colors.RED)
@@ -575,6 +608,7 @@ def stereo_command(
     """MER SAD stereo on any rectified greyscale pair; writes float32 disparity."""
     from rover_sim.cli.stereo import stereo_cmd
 
+    _check_outputs(("--out", out, "file"))
     try:
         stereo_cmd(left, right, num_disparities, out, window_px)
     except RoverSimError as e:
