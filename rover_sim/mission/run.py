@@ -110,6 +110,17 @@ def write_setup_outputs(sc: Scenario, metrics: Metrics, out_dir: Path) -> None:
     (out_dir / "events.log").write_text(f"[    0.00s] ERROR: {metrics.reason.removeprefix('run did not complete: ')}\n")
 
 
+def discard_failed_start(rec: Recorder, out_dir: Path | None, created_dir: bool) -> None:
+    """Remove what a run that failed to start wrote: its recording, and ``out_dir`` if the run created it and it is
+    empty now (the identical command can then be run again once the cause is fixed)."""
+    rec.close()
+    if out_dir is None:
+        return
+    (out_dir / "recording.rrd").unlink(missing_ok=True)
+    if created_dir and not any(out_dir.iterdir()):
+        out_dir.rmdir()
+
+
 SOL_TRACK_SPACING_M = 0.1  # a sol's drive: track vertices 10 cm apart ...
 SOL_TRACK_BLOCK_POINTS = 32  # ... in short blocks, so each track update re-sends little (recording ~ distance)
 SOL_MAX_POINTS = 2000  # stereo point clouds subsampled to this: 24 kB a VO step (a full navcam cloud is ~600 kB)
@@ -165,8 +176,10 @@ def _run(
     from rover_sim.mission.scenario import load_scenario
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
+    created_dir = False
     if out_dir is not None:
         out_dir = Path(out_dir)
+        created_dir = not out_dir.exists()
         out_dir.mkdir(parents=True, exist_ok=True)
     # the recording file must not exist without the code below that finishes it on an interrupt
     with interrupts.deferred() as pending:
@@ -212,6 +225,9 @@ def _run(
             if reraise_interrupt:
                 raise
             return metrics
+        except Exception:  # the mission could not start (e.g. a plugin does not load): leave no files behind
+            discard_failed_start(rec, out_dir, created_dir)
+            raise
         try:
             metrics = mission.run()
         finally:
