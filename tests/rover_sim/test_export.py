@@ -204,7 +204,8 @@ def test_cli_rate_export_leaves_the_run_unchanged(exported, scenario_file, tmp_p
     res = CliRunner().invoke(app, [*args, "--json", str(summary), "--no-progress"])
     assert res.exit_code == 0, res.output
     data = json.loads(summary.read_text())
-    assert set(data) == {"format", "frames", "imu_samples", "duration_s", "out"} and data["format"] == "kitti"
+    assert set(data) == {"format", "frames", "imu_samples", "duration_s", "out", "reason"} and data["format"] == "kitti"
+    assert data["reason"] == json.loads((out / "run" / "metrics.json").read_text())["reason"]
     assert data["frames"] == int(data["duration_s"] * 2) + 1  # 2 Hz from the first tick
     assert len(np.loadtxt(out / "sequences" / "00" / "times.txt")) == data["frames"]
     for name in ("truth", "dead_reckoning", "vo"):  # the noise-free extra renders drew nothing from the run's RNG

@@ -107,10 +107,11 @@ class ExportSummary:
     duration_s: float
     out: str
     dropped_duplicates: int = 0  # samples dropped because their timestamp repeated an earlier one
+    reason: str = ""  # the run's metrics.reason: "run did not complete: interrupted (SIGTERM)" for a cut-short one
 
     def to_json(self) -> dict:
         return {"format": self.format, "frames": self.frames, "imu_samples": self.imu_samples,
-                "duration_s": self.duration_s, "out": self.out}  # fmt: skip
+                "duration_s": self.duration_s, "out": self.out, "reason": self.reason}  # fmt: skip
 
 
 class DatasetSink:
@@ -221,7 +222,9 @@ def export_scenario(
     progress: bool = False,
 ) -> ExportSummary:
     """Run ``scenario`` with a :class:`DatasetSink` writing ``formats`` into ``out`` (which must be empty or new);
-    the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``."""
+    the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``. Nothing is written if the
+    mission cannot start (e.g. a plugin does not load). ``summary.reason`` is the run's ``metrics.reason``: an
+    interrupted run (Ctrl-C, SIGTERM) leaves the dataset written up to the interrupt and says so there."""
     from rover_sim.mission.pipeline import Mission
     from rover_sim.mission.run import write_outputs
     from rover_sim.mission.scenario import Scenario, load_scenario
@@ -232,7 +235,6 @@ def export_scenario(
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ExportOptionError(f"--out {out}: exists and is not an empty directory; give a new one")
-    out.mkdir(parents=True, exist_ok=True)
     bar = None
     if progress:
         from tqdm import tqdm
@@ -247,7 +249,9 @@ def export_scenario(
     try:
         mission = Mission(sc, progress=on_progress)
         try:
-            sink = DatasetSink([make_writer(f, out) for f in formats], camera, rate_hz).attach(mission)
+            out.mkdir(parents=True, exist_ok=True)
+            writers = [make_writer(f, out) for f in formats]
+            sink = DatasetSink(writers, camera, rate_hz).attach(mission)
             try:
                 metrics = mission.run()
             finally:
@@ -258,4 +262,4 @@ def export_scenario(
         if bar is not None:
             bar.close()
     write_outputs(mission, metrics, out / "run")
-    return summary
+    return dataclasses.replace(summary, reason=metrics.reason)
