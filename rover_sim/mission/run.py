@@ -12,6 +12,7 @@ import numpy as np
 from nav.trajectory import write_tum
 from rover_sim import interrupts
 from rover_sim.io.blueprint import RunLayout, blueprint_for
+from rover_sim.io.progress import SimProgress
 from rover_sim.io.recording import NullRecorder, Recorder
 from rover_sim.mission.evaluator import Metrics
 from rover_sim.mission.pipeline import Mission
@@ -193,18 +194,11 @@ def _run(
             if (record and out_dir)
             else NullRecorder()
         )
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(
-                desc=sc.name, unit="sim-s", mininterval=1.0,
-                bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]",
-            )  # fmt: skip
+        bar = SimProgress(sc.name) if progress else None  # a bar on a terminal, plain lines in a log
 
     def on_progress(t_s: float, _msg: str) -> None:
-        if bar is not None and t_s - bar.n >= 1.0:
-            bar.update(t_s - bar.n)
+        if bar is not None:
+            bar.update(t_s)
 
     try:
         try:

@@ -225,6 +225,7 @@ def export_scenario(
     the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``. Nothing is written if the
     mission cannot start (e.g. a plugin does not load). ``summary.reason`` is the run's ``metrics.reason``: an
     interrupted run (Ctrl-C, SIGTERM) leaves the dataset written up to the interrupt and says so there."""
+    from rover_sim.io.progress import SimProgress
     from rover_sim.mission.pipeline import Mission
     from rover_sim.mission.run import write_outputs
     from rover_sim.mission.scenario import Scenario, load_scenario
@@ -235,16 +236,11 @@ def export_scenario(
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ExportOptionError(f"--out {out}: exists and is not an empty directory; give a new one")
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(desc=f"export {sc.name}", unit="sim-s", mininterval=1.0,
-                   bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]")  # fmt: skip
+    bar = SimProgress(f"export {sc.name}") if progress else None  # a bar on a terminal, plain lines in a log
 
     def on_progress(t_s: float, _msg: str) -> None:
-        if bar is not None and t_s - bar.n >= 1.0:
-            bar.update(t_s - bar.n)
+        if bar is not None:
+            bar.update(t_s)
 
     try:
         mission = Mission(sc, progress=on_progress)
