@@ -13,6 +13,7 @@ from rover_sim.cli.orbital import bench_globalloc_cmd, orbital_cmd
 from rover_sim.cli.status import finish, guarded
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
+from rover_sim.examples import EXAMPLE_VO as _EXAMPLE_VO  # shipped with rover-sim (rover_sim/examples/)
 
 app = typer.Typer(help="MER-class rover simulator with a MER-style navigation stack.", no_args_is_help=True)
 bench_app = typer.Typer(help="Benchmarks: print a markdown table, optionally write JSON.", no_args_is_help=True)
@@ -21,7 +22,10 @@ app.command("view")(view_cmd)
 
 JsonOpt = Annotated[Path | None, typer.Option("--json", help="Write the results as JSON to this path.")]
 _IMPL = "an import path 'pkg.module:Class' or an entry point in 'rover_sim.plugins'"
-VoOpt = Annotated[str | None, typer.Option("--vo", help=f"Visual odometer: {_IMPL} (nav.protocols.VisualOdometer).")]
+VoOpt = Annotated[
+    str | None,
+    typer.Option("--vo", help=f"Visual odometer: {_IMPL} (nav.protocols.VisualOdometer), e.g. {_EXAMPLE_VO}."),
+]
 StereoOpt = Annotated[
     str | None, typer.Option("--stereo", help=f"Stereo matcher: {_IMPL} (nav.protocols.StereoMatcher).")
 ]
@@ -327,7 +331,10 @@ def bench_report_cmd(
 def bench_vo_cmd(
     json: JsonOpt = None,
     vo: Annotated[
-        list[str] | None, typer.Option("--vo", help=f"Also run this visual odometer ({_IMPL}); repeatable.")
+        list[str] | None,
+        typer.Option(
+            "--vo", help=f"Also run this visual odometer ({_IMPL}), e.g. the shipped example {_EXAMPLE_VO}; repeatable."
+        ),
     ] = None,
     case: Annotated[list[str] | None, typer.Option("--case", help="Only these cases (repeatable).")] = None,
     quick: Annotated[
