@@ -14,7 +14,7 @@ from rover_sim import interrupts
 from rover_sim.io.blueprint import RunLayout, blueprint_for
 from rover_sim.io.progress import SimProgress
 from rover_sim.io.recording import NullRecorder, Recorder
-from rover_sim.mission.evaluator import Metrics
+from rover_sim.mission.evaluator import Metrics, step_slips
 from rover_sim.mission.pipeline import Mission
 from rover_sim.mission.scenario import AutonavCmd, Scenario
 
@@ -55,33 +55,16 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     trajs = mission.trajectories()
     for name, tr in trajs.items():
         write_tum(tr, tdir / f"{name}.tum")
-    pdir = out_dir / "plots"
-    pdir.mkdir(exist_ok=True)
-    truth = trajs["truth"]
-    dist = truth.cumulative_distance_m()
-    errors = {
-        n: np.linalg.norm(t.positions_xyz - truth.positions_xyz, axis=1) for n, t in trajs.items() if n != "truth"
-    }
-    if len(truth) > 1:
-        plots.plot_error_vs_distance(dist, errors, pdir / "error_vs_distance.png", title=mission.sc.name)
     keep = [(z.name, z.x_m, z.y_m, z.radius_m) for z in mission.sc.keep_out]
-    plots.plot_paths(
+    t_s, true_slip, vo_slip = step_slips(mission.vo_steps)  # the samples max_slip_pct is taken over
+    plots.plot_run(
+        out_dir / "plots",
+        plots.run_title(mission.sc.name, mission.sc.seed, mission.sc.sensors.profile),
         mission.terrain,
-        {n: t.positions_xyz for n, t in trajs.items()},
-        pdir / "paths.png",
+        trajs,
         keep_out=keep,
-        title=mission.sc.name,
+        slip=(t_s, {"truth": true_slip, "VO": vo_slip}),
     )
-    if mission.vo_steps:
-        ts = np.array([s.t_s for s in mission.vo_steps])
-        plots.plot_slip(
-            ts,
-            {
-                "truth": np.array([s.true_slip for s in mission.vo_steps]),
-                "VO": np.array([s.vo_slip for s in mission.vo_steps]),
-            },
-            pdir / "slip.png",
-        )
 
 
 def setup_interrupted(sc: Scenario, exc: KeyboardInterrupt, wall_s: float) -> Metrics:
