@@ -211,6 +211,13 @@ def test_cli_rate_export_leaves_the_run_unchanged(exported, scenario_file, tmp_p
     for name in ("truth", "dead_reckoning", "vo"):  # the noise-free extra renders drew nothing from the run's RNG
         a = (out / "run" / "trajectories" / f"{name}.tum").read_text()
         assert a == (vo_steps_out / "run" / "trajectories" / f"{name}.tum").read_text(), name
+    import cv2
+
+    # the extra renders are rectified like the rover's own pairs (flight profile: raw renders, rectified here): the
+    # first frame, at the same instant as the first VO pair, differs from it by little more than the image noise
+    rate0, vo0 = (cv2.imread(str(d / "sequences" / "00" / "image_0" / "000000.png"), cv2.IMREAD_GRAYSCALE)
+                  for d in (out, vo_steps_out))  # fmt: skip
+    assert np.abs(rate0.astype(float) - vo0).mean() < 2.0  # unrectified raw images: about 7 grey levels
 
 
 @pytest.mark.parametrize(

@@ -20,6 +20,11 @@ Which pairs become frames:
 Every stream's timestamps are strictly increasing (:class:`~rover_sim.io.export.base.Stream`): of equal stamps the
 first image and the last pose are kept. Ground truth comes from the same ticks the run's evaluator records, so it
 equals the run's ``trajectories/truth.tum`` (written beside the dataset in ``OUT/run/``).
+
+Images are always the rectified pairs the onboard stack uses (the flight profile's raw renders are rectified with
+the calibration the onboard stack holds at that moment), and the camera poses written with them (KITTI ``Tr`` and
+``poses/``, EuRoC ``T_BS``, the bag's ``/tf_static``) are the true poses of those rectified
+cameras (:mod:`rover_sim.io.export.camera_truth`), not of the physical cameras.
 """
 
 from __future__ import annotations
@@ -31,10 +36,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from nav.rectify import rectification
 from nav.trajectory import Pose
 from nav.types import ImuSample
 from rover_sim.errors import RoverSimError
 from rover_sim.io.export.base import DatasetWriter, ExportMeta, Frame, Stream
+from rover_sim.io.export.camera_truth import true_rectified_pose
 
 if TYPE_CHECKING:
     from rover_sim.mission.observation import Observation
@@ -182,7 +189,7 @@ class DatasetSink:
             while self.next_due_s <= obs.t_s + 1e-9:
                 self.next_due_s += period
             f = render_without_noise(mission.world.renderer, self.camera)
-            self.frames.push(f.t_s, Frame(f.t_s, self.camera, f.left, f.right, f.rig, f.rig.left.T_rover_cam, truth))
+            self.push_frame(mission.world.observation_with([], [], {self.camera: f}), truth, rectify=True)
 
     def on_vo(self, _step: object, _T_rover_cam: object) -> None:
         """After a VO step: the corrected onboard pose replaces the one of the same stamp."""
@@ -191,12 +198,35 @@ class DatasetSink:
             self.vo.push(pose.t_s, pose)
 
     def on_images(self, obs: Observation, truth: Pose) -> None:
-        if self.camera not in obs.images or self.mission is None:
-            return
-        pair = self.mission.onboard.rectified(obs, self.camera)  # flight profile: raw pairs exported rectified
-        true_rig = self.mission.world.renderer.rig(self.camera)  # the mast as it physically stands
-        frame = Frame(pair.t_s, self.camera, pair.left_u8, pair.right_u8, pair.rig, true_rig.left.T_rover_cam, truth)
-        self.frames.push(pair.t_s, frame)
+        if self.camera in obs.images and self.mission is not None:
+            self.push_frame(obs, truth, rectify=False)
+
+    def push_frame(self, obs: Observation, truth: Pose, rectify: bool) -> None:
+        """The pair of ``obs`` as the onboard stack rectifies it, with the true poses of the rectified cameras.
+
+        ``rectify`` False: a pair the rover takes, rectified by the onboard stack itself (as its stereo and VO
+        use it). True: an extra render, rectified here with the calibration the onboard stack holds now, without
+        showing it to the onboard stack (its epipolar check must not see pairs the rover never took)."""
+        mission = self.mission
+        assert mission is not None, "attach() the sink first"
+        onboard, camera = mission.onboard, self.camera
+        if rectify:
+            raw, calib = obs.pair(camera), onboard.rectifying_calibration(obs, camera)
+            rect = None if calib is None else rectification(calib)
+            left, right = (raw.left_u8, raw.right_u8) if rect is None else rect.apply(raw.left_u8, raw.right_u8)
+            rig = raw.rig if rect is None else rect.rig
+        else:
+            pair = onboard.rectified(obs, camera)  # flight profile: raw pairs exported rectified
+            left, right, rig = pair.left_u8, pair.right_u8, pair.rig
+            calib = onboard.rectifying_calibration(obs, camera)  # what that pair was rectified with
+        true_rig = mission.world.renderer.rig(camera)  # the mast as it physically stands
+        T_left, T_right = true_rig.left.T_rover_cam, true_rig.right.T_rover_cam
+        truth_lens = mission.world.calibration
+        if calib is not None and truth_lens is not None:  # rectified through calibrated models: the rectified cameras
+            T_left = true_rectified_pose(rig.left, calib.left, truth_lens.true_model(true_rig.left))
+            T_right = true_rectified_pose(rig.right, calib.right, truth_lens.true_model(true_rig.right))
+        t_s = obs.pair(camera).t_s
+        self.frames.push(t_s, Frame(t_s, camera, left, right, rig, T_left, T_right, true_rig.left.T_rover_cam, truth))
 
     def close(self, fmt: str = "", out: str = "") -> ExportSummary:
         """Flush the held-back poses and close every writer."""

@@ -11,8 +11,10 @@
 
 The body frame B is the rover frame, which is also the IMU frame (``imu0`` has T_BS = identity). ``T_BS`` of a
 camera is its pose on the rover (``p_B = T_BS p_S``, as in EuRoC), taken at the first frame (the navcam moves
-with the mast: re-pointing it mid-run is not reflected). The images are rectified: ``distortion_coefficients``
-are zero. R, the ground-truth reference frame, is the simulator's world (x east, y north, z up).
+with the mast: re-pointing it mid-run is not reflected): the true pose of the *rectified* camera the images are
+in (:mod:`rover_sim.io.export.camera_truth`); cam0's ``T_BS_physical_camera`` is the physical camera's, for
+reference. The images are rectified: ``distortion_coefficients`` are zero. R, the ground-truth reference frame,
+is the simulator's world (x east, y north, z up).
 """
 
 from __future__ import annotations
@@ -145,9 +147,10 @@ class EurocWriter(DatasetWriter):
                 "sensor_type: camera\n"
                 + comment(
                     f"{f.camera} {'left' if i == 0 else 'right'}, rectified greyscale (frames: {meta.mode}; "
-                    "rate_hz is the mean rate)"
+                    "rate_hz is the mean rate); T_BS: the true pose of the rectified camera the images are in"
                 )
                 + matrix_yaml("T_BS", T)
+                + (matrix_yaml("T_BS_physical_camera", f.T_rover_cam_physical) if i == 0 else "")
                 + f"rate_hz: {rate:.4f}\nresolution: [{cam.width_px}, {cam.height_px}]\ncamera_model: pinhole\n"
                 + f"intrinsics: [{cam.fx_px:.9f}, {cam.fy_px:.9f}, {cam.cx_px:.9f}, {cam.cy_px:.9f}]"
                 + "  # fu, fv, cu, cv\n"
