@@ -39,9 +39,17 @@ def export_cmd(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Clear a non-empty --out directory first (its contents only).")
     ] = False,
+    openvins: Annotated[
+        bool,
+        typer.Option(
+            "--openvins",
+            help="euroc: also write OpenVINS's kalibr_imucam_chain.yaml (T_imu_cam) and kalibr_imu_chain.yaml.",
+        ),
+    ] = False,
 ) -> None:
     """Run a scenario (any commands, autonav included) and write a dataset: stereo pairs of --camera, IMU, wheel
     encoders, ground truth (and, in the ROS 2 bag, the onboard estimates). The run's outputs go to OUT/run/.
+    EuRoC exports carry the Kalibr calibration (camchain-imucam.yaml, imu.yaml) beside mav0/.
 
     Exit status: 0 written, 2 bad input, 3 the run stopped on an error, 130 Ctrl-C, 143 SIGTERM (what was recorded
     up to the interrupt is kept)."""
@@ -50,14 +58,16 @@ def export_cmd(
     from rover_sim.mission.scenario import load_scenario
 
     try:
-        check_options(format_, camera, rate_hz, at_vo_steps)
+        check_options(format_, camera, rate_hz, at_vo_steps, openvins)
         check_outputs(("--out", out, "dir"), ("--json", json, "file"))
         sc = load_scenario(scenario, list(set_ or []), seed)  # bad input is reported before --out is touched
         prepare_out_dir(out, overwrite)
     except RoverSimError as e:
         raise fail(e) from None
     with guarded():
-        summary = export_scenario(sc, out, formats=(format_,), camera=camera, rate_hz=rate_hz, progress=progress)
+        summary = export_scenario(
+            sc, out, formats=(format_,), camera=camera, rate_hz=rate_hz, progress=progress, openvins=openvins
+        )
     status = of_reason(False, summary.reason) if summary.reason.startswith(RUN_DID_NOT_COMPLETE) else ExitStatus.OK
     what = (
         f"{summary.frames} frames of {camera}, {summary.imu_samples} IMU samples over {summary.duration_s:.1f} s "

@@ -1,4 +1,4 @@
-"""Ground truth in the exported images' frame.
+"""Ground truth in the exported images' frame, and the Kalibr/OpenVINS calibration beside a EuRoC export.
 
 On the flight profile the exported images are rectified through the calibrated models, so the camera they are in
 is turned from the physical navcam by the mounting, rectifying and calibration rotations (0.1-0.2 deg). Every
@@ -11,11 +11,16 @@ format's ground truth (KITTI ``Tr`` + ``poses/``, EuRoC ``T_BS`` + ground truth,
 (b) from the images: the rotation fitted between the flight and ideal exports' first left images of the same
     drive (KLT matches, the ideal pair's stereo depth) agrees to <= 0.02 deg with the rotation between their
     exported truth orientations.
+
+The Kalibr ``camchain-imucam.yaml`` (``T_cam_imu``) and OpenVINS ``kalibr_imucam_chain.yaml`` (``T_imu_cam``, the
+inverse) reproject a world point through the exported truth onto the same pixel as the EuRoC/KITTI camera model
+(<= 0.01 px).
 """
 
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import cv2
@@ -25,6 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from nav.geometry import quat_wxyz_to_R, se3, se3_inv
 from rover_sim.io.export import FORMATS, DatasetSink, make_writer
+from rover_sim.io.export.kalibr import CAMCHAIN, IMU, OPENVINS_CAMCHAIN, OPENVINS_IMU
 from rover_sim.mission.scenario import scenario_from_dict
 
 TOL_DEG = 0.02
@@ -41,7 +47,7 @@ TINY = {
 
 
 def export_with_objects(out: Path, profile: str, distance_m: float) -> dict:
-    """Run the tiny drive with a sink writing every format, keeping the objects the first
+    """Run the tiny drive with a sink writing every format (and OpenVINS's files), keeping the objects the first
     navcam pair was rectified with: the calibration, its rectification and the true raw models at capture."""
     from nav.rectify import rectification
     from rover_sim.mission.pipeline import Mission
@@ -50,7 +56,7 @@ def export_with_objects(out: Path, profile: str, distance_m: float) -> dict:
     sc = scenario_from_dict(TINY, "tiny", [f'sensors.profile="{profile}"', f"commands.0.distance_m={distance_m}"])
     mission = Mission(sc)
     out.mkdir(parents=True, exist_ok=True)
-    sink = DatasetSink([make_writer(f, out) for f in FORMATS], "navcam").attach(mission)
+    sink = DatasetSink([make_writer(f, out, openvins=f == "euroc") for f in FORMATS], "navcam").attach(mission)
     first: dict = {}
 
     def keep_first(obs, truth) -> None:  # noqa: ANN001 - after the sink: the pair is rectified by now
@@ -256,3 +262,92 @@ def test_truth_agrees_with_the_images(flight, ideal, fmt):
     assert physical_deg > 3 * TOL_DEG
 
 
+# --------------------------------------------------------------------------------------- Kalibr / OpenVINS
+def kalibr_yaml(path: Path) -> dict:
+    from ruamel.yaml import YAML
+
+    text = path.read_text()
+    return YAML(typ="safe").load(text.removeprefix("%YAML:1.0\n"))  # OpenCV's header is not YAML 1.2
+
+
+def pixel(K: np.ndarray, T_cam_world: np.ndarray, p_world: np.ndarray) -> np.ndarray:
+    p = T_cam_world[:3, :3] @ p_world + T_cam_world[:3, 3]
+    return np.array([K[0, 0] * p[0] / p[2] + K[0, 2], K[1, 1] * p[1] / p[2] + K[1, 2]])
+
+
+def intrinsics_K(values: list[float]) -> np.ndarray:
+    fu, fv, pu, pv = values
+    return np.array([[fu, 0.0, pu], [0.0, fv, pv], [0.0, 0.0, 1.0]])
+
+
+def test_kalibr_and_openvins_reproject_like_the_exported_camera_model(flight):
+    out = flight["out"]
+    for name in (CAMCHAIN, IMU, OPENVINS_CAMCHAIN, OPENVINS_IMU):
+        assert (out / name).is_file(), name
+    chain, ov = kalibr_yaml(out / CAMCHAIN), kalibr_yaml(out / OPENVINS_CAMCHAIN)
+    T_world_rover = euroc_truth_rover(out, first_frame_t_s(out))  # the exported truth at the first frame
+    T_rover_world = se3_inv(T_world_rover)
+    T_world_cam0 = euroc_world_cam(out)
+    p_world = (T_world_cam0 @ np.array([0.4, -0.3, 3.0, 1.0]))[:3]  # a point 3 m in front of the left camera
+    seq = out / "sequences" / "00"
+    calib = {k: np.array(v.split(), float) for k, v in (ln.split(":", 1) for ln in (seq / "calib.txt").open())}
+    P0, P1, Tr = (np.vstack([calib[k].reshape(3, 4), [0, 0, 0, 1]]) for k in ("P0", "P1", "Tr"))
+    kitti0 = P0 @ Tr @ T_rover_world @ np.append(p_world, 1.0)
+    kitti1 = P1 @ Tr @ T_rover_world @ np.append(p_world, 1.0)
+    kitti = [kitti0[:2] / kitti0[2], kitti1[:2] / kitti1[2]]
+    T_c0_imu = np.array(chain["cam0"]["T_cam_imu"])
+    for i, cam in enumerate(("cam0", "cam1")):
+        sensor = euroc_sensor(out, cam)
+        euroc = pixel(intrinsics_K(sensor["intrinsics"]), se3_inv(np.array(sensor["T_BS"]["data"]).reshape(4, 4))
+                      @ T_rover_world, p_world)  # fmt: skip
+        K = intrinsics_K(chain[cam]["intrinsics"])
+        assert chain[cam]["resolution"] == sensor["resolution"] and chain[cam]["camera_model"] == "pinhole"
+        assert chain[cam]["distortion_model"] == "radtan" and chain[cam]["distortion_coeffs"] == [0.0] * 4
+        assert chain[cam]["timeshift_cam_imu"] == 0.0
+        via_kalibr = pixel(K, np.array(chain[cam]["T_cam_imu"]) @ T_rover_world, p_world)
+        via_openvins = pixel(intrinsics_K(ov[cam]["intrinsics"]), se3_inv(np.array(ov[cam]["T_imu_cam"]))
+                             @ T_rover_world, p_world)  # fmt: skip
+        pixels = {"kalibr": via_kalibr, "openvins": via_openvins}
+        if i == 1:
+            pixels["kalibr T_cn_cnm1"] = pixel(K, np.array(chain["cam1"]["T_cn_cnm1"]) @ T_c0_imu @ T_rover_world,
+                                               p_world)  # fmt: skip
+        for how, uv in pixels.items():
+            assert np.abs(uv - euroc).max() <= 0.01, (cam, how, uv, euroc)
+        gaps = ", ".join(f"{k} {np.abs(v - euroc).max():.1e} px" for k, v in pixels.items())
+        print(f"\n{cam}: EuRoC {euroc}, {gaps}")
+        assert 0 < euroc[0] < K[0, 2] * 2 and 0 < euroc[1] < K[1, 2] * 2
+        if i == 0:  # KITTI's P0 and Tr: the same left camera
+            assert np.abs(kitti[0] - euroc).max() <= 0.01
+        else:  # KITTI's P1 is the rectified rig (baseline along x): the true right camera differs by a few px/1000
+            assert np.abs(kitti[1] - euroc).max() < 1.0
+    np.testing.assert_allclose(np.array(ov["cam0"]["T_imu_cam"]) @ T_c0_imu, np.eye(4), atol=1e-9)  # the inverse
+
+
+def test_imu_noise_in_kalibr_units(flight):
+    from rover_sim.sim.sensors import ImuParams
+
+    p = ImuParams()  # the defaults the flight profile flies (LN-200 class)
+    imu, ov = kalibr_yaml(flight["out"] / IMU), kalibr_yaml(flight["out"] / OPENVINS_IMU)["imu0"]
+    expected = {
+        "gyroscope_noise_density": p.gyro_arw_deg_sqrt_h * math.pi / 180.0 / 60.0,  # deg/sqrt(h) -> rad/s/sqrt(Hz)
+        "accelerometer_noise_density": p.accel_noise_ug_sqrt_hz * 1e-6 * 9.80665,  # ug/sqrt(Hz) -> m/s^2/sqrt(Hz)
+        "gyroscope_random_walk": p.gyro_bias_instability_deg_h * math.pi / 180.0 / 3600.0
+        * math.sqrt(2.0 / p.gyro_bias_corr_time_s),  # Gauss-Markov sigma sqrt(2/tau): rad/s^2/sqrt(Hz)
+        "accelerometer_random_walk": 0.0,
+        "update_rate": p.rate_hz,
+    }
+    for key, value in expected.items():
+        assert imu[key] == pytest.approx(value, rel=1e-5, abs=1e-12), key
+        assert ov[key] == pytest.approx(value, rel=1e-5, abs=1e-12), key
+    assert imu["rostopic"] == ov["rostopic"] == "/imu0" and ov["model"] == "kalibr"
+    np.testing.assert_array_equal(np.array(ov["T_i_b"]), np.eye(4))
+
+
+def test_openvins_needs_euroc(tmp_path):
+    from typer.testing import CliRunner
+
+    from rover_sim.cli.main import app
+
+    r = CliRunner().invoke(app, ["export", "wopmay", "--format", "kitti", "--openvins", "--out", str(tmp_path / "x")])
+    assert r.exit_code == 2 and "--openvins" in r.stderr and "--format euroc" in r.stderr, r.output
+    assert not (tmp_path / "x").exists()

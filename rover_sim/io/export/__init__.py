@@ -23,7 +23,7 @@ equals the run's ``trajectories/truth.tum`` (written beside the dataset in ``OUT
 
 Images are always the rectified pairs the onboard stack uses (the flight profile's raw renders are rectified with
 the calibration the onboard stack holds at that moment), and the camera poses written with them (KITTI ``Tr`` and
-``poses/``, EuRoC ``T_BS``, the bag's ``/tf_static``) are the true poses of those rectified
+``poses/``, EuRoC ``T_BS``, the bag's ``/tf_static``, the Kalibr files) are the true poses of those rectified
 cameras (:mod:`rover_sim.io.export.camera_truth`), not of the physical cameras.
 """
 
@@ -61,7 +61,9 @@ class ExportOptionError(RoverSimError, ValueError):
     """A bad export option; the message names the option and the allowed values."""
 
 
-def check_options(fmt: str, camera: str, rate_hz: float | None, at_vo_steps: bool = False) -> None:
+def check_options(
+    fmt: str, camera: str, rate_hz: float | None, at_vo_steps: bool = False, openvins: bool = False
+) -> None:
     if fmt not in FORMATS:
         raise ExportOptionError(f"--format {fmt!r}: choose one of {', '.join(FORMATS)}")
     if camera not in CAMERAS:
@@ -70,11 +72,13 @@ def check_options(fmt: str, camera: str, rate_hz: float | None, at_vo_steps: boo
         raise ExportOptionError("--rate-hz and --at-vo-steps exclude each other: give one of them (or neither)")
     if rate_hz is not None and not (0.0 < rate_hz <= MAX_RATE_HZ):
         raise ExportOptionError(f"--rate-hz {rate_hz:g}: must be > 0 and <= {MAX_RATE_HZ:g} (the tick rate)")
+    if openvins and fmt != "euroc":
+        raise ExportOptionError(f"--openvins writes OpenVINS's files beside a EuRoC export: --format euroc, not {fmt}")
 
 
-def make_writer(fmt: str, out: Path) -> DatasetWriter:
-    """The writer of ``fmt`` rooted at ``out`` (KITTI: ``out/sequences``, EuRoC: ``out/mav0``, ROS 2:
-    ``out/rosbag2``)."""
+def make_writer(fmt: str, out: Path, openvins: bool = False) -> DatasetWriter:
+    """The writer of ``fmt`` rooted at ``out`` (KITTI: ``out/sequences``, EuRoC: ``out/mav0`` and the Kalibr files
+    beside it, with ``openvins`` OpenVINS's too; ROS 2: ``out/rosbag2``)."""
     check_options(fmt, CAMERAS[0], None)
     out = Path(out)
     if fmt == "kitti":
@@ -84,7 +88,7 @@ def make_writer(fmt: str, out: Path) -> DatasetWriter:
     if fmt == "euroc":
         from rover_sim.io.export.euroc import EurocWriter
 
-        return EurocWriter(out)
+        return EurocWriter(out, openvins=openvins)
     from rover_sim.io.export.rosbag2 import Rosbag2Writer
 
     return Rosbag2Writer(out / "rosbag2")
@@ -250,9 +254,11 @@ def export_scenario(
     seed: int | None = None,
     overrides: list[str] | None = None,
     progress: bool = False,
+    openvins: bool = False,
 ) -> ExportSummary:
     """Run ``scenario`` with a :class:`DatasetSink` writing ``formats`` into ``out`` (which must be empty or new);
-    the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``. Nothing is written if the
+    the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``; ``openvins``: OpenVINS's
+    calibration files beside a EuRoC export's Kalibr files. Nothing is written if the
     mission cannot start (e.g. a plugin does not load). ``summary.reason`` is the run's ``metrics.reason``: an
     interrupted run (Ctrl-C, SIGTERM) leaves the dataset written up to the interrupt and says so there."""
     from rover_sim.io.progress import SimProgress
@@ -262,6 +268,8 @@ def export_scenario(
 
     for fmt in formats:
         check_options(fmt, camera, rate_hz)
+    if openvins and "euroc" not in formats:
+        raise ExportOptionError("--openvins writes OpenVINS's files beside a EuRoC export: include the euroc format")
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
@@ -276,7 +284,7 @@ def export_scenario(
         mission = Mission(sc, progress=on_progress)
         try:
             out.mkdir(parents=True, exist_ok=True)
-            writers = [make_writer(f, out) for f in formats]
+            writers = [make_writer(f, out, openvins and f == "euroc") for f in formats]
             sink = DatasetSink(writers, camera, rate_hz).attach(mission)
             try:
                 metrics = mission.run()
