@@ -63,7 +63,7 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
         mission.terrain,
         trajs,
         keep_out=keep,
-        slip=(t_s, {"truth": true_slip, "VO": vo_slip}),
+        slip=(t_s, {"truth": true_slip, "vo": vo_slip}),
     )
 
 
