@@ -10,6 +10,8 @@ import typer
 import rover_sim  # noqa: F401  (sets MUJOCO_GL before mujoco is imported anywhere)
 from rover_sim.cli.export import export_cmd
 from rover_sim.cli.orbital import bench_globalloc_cmd, orbital_cmd
+from rover_sim.cli.outdir import outputs_or_exit
+from rover_sim.cli.scenarios import scenarios_cmd
 from rover_sim.cli.status import finish, guarded
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
@@ -19,6 +21,7 @@ app = typer.Typer(help="MER-class rover simulator with a MER-style navigation st
 bench_app = typer.Typer(help="Benchmarks: print a markdown table, optionally write JSON.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 app.command("view")(view_cmd)
+app.command("scenarios")(scenarios_cmd)
 
 JsonOpt = Annotated[Path | None, typer.Option("--json", help="Write the results as JSON to this path.")]
 _IMPL = "an import path 'pkg.module:Class' or an entry point in 'rover_sim.plugins'"
@@ -41,20 +44,6 @@ RENDER_PX = (16, 2048)  # `render --resolution`: MuJoCo's offscreen buffer is al
 def _fail(err: Exception) -> None:
     typer.secho(f"error: {err}", fg=typer.colors.RED, err=True)
     raise typer.Exit(code=2)
-
-
-def _check_outputs(*outputs: tuple[str, Path | str | None, str]) -> None:
-    """Refuse unwritable output paths before any work: one line naming the option and the path, exit 2."""
-    from rover_sim.cli.outdir import check_outputs
-
-    try:
-        check_outputs(*outputs)
-    except RoverSimError as e:
-        _fail(e)
-
-
-def _json_junit(json: Path | None, junit: Path | None) -> None:
-    _check_outputs(("--json", json, "file"), ("--junit", junit, "file"))
 
 
 @app.command("check-gl")
@@ -92,9 +81,9 @@ def bench_slip(
     """Drive straight uphill on uniform sand and bedrock at 0-30 deg; slip vs published anchors, physics speed."""
     if soil_model not in ("bekker", "wong_reece"):
         _fail(ValueError(f"--soil-model must be 'bekker' or 'wong_reece', not {soil_model!r}"))
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     if soil_model == "wong_reece":
-        _check_outputs(("--png", png, "file"))
+        outputs_or_exit(("--png", png, "file"))
     with guarded():
         if soil_model == "wong_reece":
             from rover_sim.bench import mobility
@@ -114,7 +103,7 @@ def bench_slip(
 @bench_app.command("render")
 def bench_render_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.bench.junit_cases import render_cases
         from rover_sim.bench.render import bench_render
@@ -134,7 +123,7 @@ def bench_stereo_cmd(
 ) -> None:
     """MER SAD stereo vs OpenCV StereoBM on rendered hazcam pairs with ground truth (speed, density, bad-1px) at
     256x256 and 1024x1024; any --stereo plugin on the same 256 px pairs."""
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.bench.junit_cases import stereo_cases
         from rover_sim.bench.stereo import bench_stereo
@@ -158,7 +147,7 @@ def bench_autonav_cmd(
     """GESTALT autonav over seeded rock fields (10 % cover, rocks to 60 cm, goal 20 m away); with --planner,
     --stereo or --vo the same fields run again with those parts swapped in."""
     path = str(json) if json else None
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.bench.autonav import bench_autonav
         from rover_sim.bench.junit_cases import autonav_cases
@@ -188,8 +177,8 @@ def bench_traverse_cmd(
 ) -> None:
     """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
     100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
-    _json_junit(json, junit)
-    _check_outputs(("--out", out, "dir"))
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
+    outputs_or_exit(("--out", out, "dir"))
     with guarded():
         from rover_sim.bench.junit_cases import traverse_cases
         from rover_sim.bench.traverse import bench_traverse
@@ -203,7 +192,7 @@ def bench_dimes_cmd(
     json: JsonOpt = None, runs: Annotated[int, typer.Option(help="Seeded descents.")] = 50, junit: JunitOpt = None
 ) -> None:
     """DIMES: Monte-Carlo descents over winds and terrains; horizontal velocity error and featureless rejection."""
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.bench.dimes import bench_dimes
         from rover_sim.bench.junit_cases import dimes_cases
@@ -215,7 +204,7 @@ def bench_dimes_cmd(
 @bench_app.command("sweep")
 def bench_sweep_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Sweep speed: 8 short jobs serially and on a 2-worker pool (acceptance: parallel <= 0.65x serial)."""
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.bench.junit_cases import sweep_cases
         from rover_sim.bench.sweep import bench_sweep
@@ -239,7 +228,7 @@ def bench_rocks_cmd(
 ) -> None:
     """Rock-based localisation: extraction, modelling, matching between sites, chain adjustment vs DR and VO;
     figures by rock class (analytic / irregular) with --irregular-fraction."""
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.bench.junit_cases import rocks_cases
         from rover_sim.bench.rocks import bench_rocks
@@ -270,7 +259,7 @@ def render_cmd(
         _fail(ValueError(f"--pair {pair!r}: choose from {', '.join(pairs)}"))
     if not RENDER_PX[0] <= resolution <= RENDER_PX[1]:  # checked first: too large an offscreen buffer kills MuJoCo
         _fail(ValueError(f"--resolution {resolution}: allowed {RENDER_PX[0]}..{RENDER_PX[1]} pixels"))
-    _check_outputs(("--out", out, "dir"))
+    outputs_or_exit(("--out", out, "dir"))
     try:
         sc = load_scenario(scenario, seed=seed)
     except RoverSimError as e:
@@ -355,7 +344,7 @@ def bench_vo_cmd(
     for c in case or []:
         if c not in VO_CASES:
             _fail(ValueError(f"--case {c!r}: choose from {', '.join(VO_CASES)}"))
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.bench.seeded import parse_perturb
         from rover_sim.bench.seeds import parse_seeds
@@ -431,9 +420,9 @@ def bench_suite_cmd(
     for p in profile or []:
         if p not in ("flight", "ideal"):
             _fail(ValueError(f"--profile {p!r}: choose flight or ideal"))
-    _json_junit(json, junit)
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     if update_baseline and baseline is not None:
-        _check_outputs(("--baseline", baseline, "file"))
+        outputs_or_exit(("--baseline", baseline, "file"))
     with guarded():
         from rover_sim.bench.seeded import parse_perturb
         from rover_sim.bench.seeds import parse_seeds
@@ -487,7 +476,7 @@ def run_cmd(
 
     if out is None:
         out, overwrite = Path("runs/latest"), True
-    _check_outputs(("--out", out, "dir"), ("--junit", junit, "file"))
+    outputs_or_exit(("--out", out, "dir"), ("--junit", junit, "file"))
     with guarded():
         from rover_sim.mission.run import run_scenario
         from rover_sim.mission.scenario import load_scenario, plugin_overrides
@@ -510,50 +499,6 @@ def run_cmd(
     where = f"outputs in {out}/ (plots in {out}/plots/)"
     typer.echo(f"{where}; open the recording with: rover-sim view {out}" if record else where)
     finish(junit, "run", [scenario_case(metrics.deterministic_dict(), "run")])  # status: see rover_sim.cli.status
-
-
-ABBREVIATIONS = ("e.g.", "i.e.", "al.", "cf.", "vs.", "approx.", "fig.")  # a full stop that ends no sentence
-
-
-def first_sentence(text: str) -> str:
-    """The first sentence of ``text`` whole (whitespace collapsed): up to the first ``.``, ``!`` or ``?`` that is
-    followed by a space or the end, outside brackets and not ending an abbreviation such as "et al."."""
-    text = " ".join(text.split())
-    depth = 0
-    for i, ch in enumerate(text):
-        if ch in "([":
-            depth += 1
-        elif ch in ")]":
-            depth = max(depth - 1, 0)
-        elif ch in ".!?" and depth == 0 and (i + 1 == len(text) or text[i + 1] == " "):
-            if text[: i + 1].rsplit(" ", 1)[-1].lower() not in ABBREVIATIONS:
-                return text[: i + 1]
-    return text
-
-
-@app.command("scenarios")
-def scenarios_cmd() -> None:
-    """List the scenario catalogue: name, `fast` (in the CI subset) and the description's first sentence."""
-    from rover_sim.mission.scenario import catalogue, load_scenario
-
-    names = catalogue()
-    if not names:
-        from rover_sim.resources import scenarios_dir
-
-        _fail(FileNotFoundError(f"no scenario files (*.toml) in {scenarios_dir()}"))
-    width = max((len(n) for n in names), default=0)
-    bad = False
-    for name in names:
-        try:
-            s = load_scenario(name)
-        except RoverSimError as e:
-            typer.echo(f"{name:<{width}}  ?     invalid: {e}")
-            bad = True
-            continue
-        first = first_sentence(s.description)
-        typer.echo(f"{name:<{width}}  {'fast' if s.fast else '-   '}  {first}")
-    if bad:
-        raise typer.Exit(code=2)
 
 
 @app.command("demo")
@@ -584,7 +529,7 @@ def sweep_cmd(
     """Monte-Carlo sweep: DIR/results.csv (one row per job), DIR/plots/*.png, DIR/jobs/<job_id>/metrics.json."""
     from rover_sim.mission.sweep import run_sweep
 
-    _check_outputs(("--out", out, "dir"))
+    outputs_or_exit(("--out", out, "dir"))
 
     def report(done: int, total: int, job, result) -> None:
         if not result.ok:
@@ -634,7 +579,7 @@ def stereo_command(
     """MER SAD stereo on any rectified greyscale pair; writes float32 disparity."""
     from rover_sim.cli.stereo import stereo_cmd
 
-    _check_outputs(("--out", out, "file"))
+    outputs_or_exit(("--out", out, "file"))
     try:
         stereo_cmd(left, right, num_disparities, out, window_px)
     except RoverSimError as e:

@@ -63,6 +63,16 @@ def check_outputs(*outputs: tuple[str, Path | str | None, str]) -> None:
             raise OutputNotWritable(f"{option} {path}: {problem}")
 
 
+def outputs_or_exit(*outputs: tuple[str, Path | str | None, str]) -> None:
+    """:func:`check_outputs` for a command: an unwritable output is one line on stderr and exit 2."""
+    from rover_sim.cli.status import fail
+
+    try:
+        check_outputs(*outputs)
+    except OutputNotWritable as e:
+        raise fail(e) from None
+
+
 def _protected(d: Path) -> str | None:
     """Why ``d`` (resolved) may not be cleared, or None."""
     home = Path.home().resolve()
