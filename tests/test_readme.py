@@ -1,6 +1,6 @@
 """The README's Python snippets run as written, each saved to a file and run as a script in a fresh interpreter (the
-way a new user runs what they copy: a snippet that works pasted into a session can still fail as a script, e.g. a
-``spawn`` worker re-importing a file that has no ``if __name__ == "__main__":`` guard)."""
+way a new user runs what they copy: a snippet that works pasted into an interactive interpreter can fail as a
+script, e.g. a ``spawn`` worker re-importing a file that has no ``if __name__ == "__main__":`` guard)."""
 
 from __future__ import annotations
 
