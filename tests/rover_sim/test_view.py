@@ -64,6 +64,7 @@ def start_view(rrd: Path, *args: str) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # a background job ignores SIGINT
     )
 
 
@@ -86,7 +87,8 @@ def test_serves_on_localhost_and_sigterm_leaves_no_server(rrd):
         assert proc.wait(timeout=30) == ExitStatus.SIGTERM
     finally:
         if proc.poll() is None:
-            proc.kill()
+            proc.send_signal(signal.SIGTERM)
+            proc.wait(timeout=30)
     time.sleep(0.5)
     assert web not in listening() and grpc not in listening()  # the rerun server went with it
 
@@ -111,8 +113,11 @@ def test_bind_elsewhere_on_request(rrd):
         seen = wait_listening([web, grpc], proc)
         assert seen[web] == {"0.0.0.0"}, seen
         assert "http://127.0.0.1:" in proc.stdout.readline()  # the URL to open on this machine
-    finally:
         proc.send_signal(signal.SIGINT)  # Ctrl-C: the way to stop it, status 0
         assert proc.wait(timeout=30) == 0
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)  # stops the viewer with it
+            proc.wait(timeout=30)
     time.sleep(0.5)
     assert web not in listening()

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 from nav.rectify import rectification
 from nav.trajectory import Pose
 from nav.types import ImuSample
+from rover_sim import interrupts
 from rover_sim.errors import RoverSimError
 from rover_sim.io.export.base import DatasetWriter, ExportMeta, Frame, Stream
 from rover_sim.io.export.camera_truth import true_rectified_pose
@@ -134,17 +135,27 @@ class DatasetSink:
         self.camera, self.rate_hz = camera, rate_hz
         self.mission: Mission | None = None
         self.next_due_s: float | None = None
-        self.frames: Stream[Frame] = Stream(self.each("frame"))
+        self.frames: Stream[Frame] = Stream(self.each("frame", whole=True))
         self.imu: Stream[ImuSample] = Stream(self.each("imu"))
         self.enc: Stream[tuple] = Stream(lambda item: [w.encoders(*item) for w in self.writers])
         self.gt: Stream[Pose] = Stream(self.each("truth"), keep="last")
         self.dr: Stream[Pose] = Stream(lambda p: [w.estimate("dead_reckoning", p) for w in self.writers], keep="last")
         self.vo: Stream[Pose] = Stream(lambda p: [w.estimate("vo", p) for w in self.writers], keep="last")
 
-    def each(self, method: str):  # noqa: ANN201
+    def each(self, method: str, whole: bool = False):  # noqa: ANN201
+        """Hand an item to every writer's ``method``. ``whole``: Ctrl-C or SIGTERM is held until every writer has
+        written it (a frame is several files and index lines: an interrupted export keeps whole frames only)."""
+
         def emit(item: object) -> None:
-            for w in self.writers:
-                getattr(w, method)(item)
+            if not whole:
+                for w in self.writers:
+                    getattr(w, method)(item)
+                return
+            with interrupts.deferred() as pending:
+                for w in self.writers:
+                    getattr(w, method)(item)
+            if pending.exc is not None:
+                raise pending.exc
 
         return emit
 
