@@ -423,6 +423,7 @@ def bench_suite_cmd(
     outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"))
     if update_baseline and baseline is not None:
         outputs_or_exit(("--baseline", baseline, "file"))
+    outputs_or_exit(("--png", png, "file"))
     with guarded():
         from rover_sim.bench.seeded import parse_perturb
         from rover_sim.bench.seeds import parse_seeds

@@ -87,8 +87,12 @@ def _commands(tiny: Path, ok: Path, bad: Path) -> list[list[str]]:
         ["bench", "slip", "--png", str(bad / "s.png")],
         ["bench", "traverse", "--out", str(bad / "out")],
         ["bench", "suite", "--fast", "--update-baseline", "--baseline", str(bad / "b.json")],
+        ["bench", "suite", "--fast", "--png", str(bad / "box.png")],
+        ["orbital", str(tiny), "--out", str(bad / "out")],
+        ["bench", "globalloc", "--cache", str(bad / "cache")],
     ]
-    for bench in ("slip", "render", "stereo", "autonav", "traverse", "dimes", "sweep", "rocks", "vo", "suite"):
+    for bench in ("slip", "render", "stereo", "autonav", "traverse", "dimes", "sweep", "rocks", "vo", "suite",
+                  "globalloc"):
         cmds.append(["bench", bench, "--json", str(bad / "r.json")])
         cmds.append(["bench", bench, "--junit", str(bad / "j.xml")])
     return cmds
