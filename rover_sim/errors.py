@@ -27,6 +27,20 @@ class ConfigError(RoverSimError):
         super().__init__(f"{path}: field '{field}': {message}")
 
 
+class UnknownScenario(ConfigError):
+    """No scenario of that name (or no such file): names the closest scenario names and the catalogue."""
+
+    def __init__(self, name: str, known: list[str], is_name: bool = True) -> None:
+        import difflib
+
+        close = difflib.get_close_matches(name, known, n=3, cutoff=0.6) if is_name else []
+        close += [k for k in known if is_name and name.lower() in k and k not in close][: 3 - len(close)]
+        hint = f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
+        what = f"no scenario named {name!r}" if is_name else f"{name}: no such scenario file"
+        RoverSimError.__init__(self, f"{what}{hint}; known scenarios: {', '.join(known)}")
+        self.path, self.field = name, "(file)"
+
+
 class RenderingUnavailable(RoverSimError):
     """No offscreen OpenGL (EGL) is available."""
 

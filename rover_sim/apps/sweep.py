@@ -135,8 +135,9 @@ def plan_jobs(
     jobs: dict[str, Job] = {}
     points = itertools.product(*[list(zip(a.raw, a.values, strict=True)) for a in axes])
     for point, seed in itertools.product(list(points), seed_list):
-        sets = list(overrides) + [f"{k}={raw}" for k, (raw, _) in zip(keys, point, strict=True)]
-        resolved = load_scenario(scenario, sets, seed).resolved_dict()
+        grid = [f"{k}={raw}" for k, (raw, _) in zip(keys, point, strict=True)]
+        flags = [f"--set {o}" for o in overrides] + [f"--grid {g}" for g in grid]
+        resolved = load_scenario(scenario, list(overrides) + grid, seed, flags).resolved_dict()
         job = Job(job_id_of(resolved), {k: v for k, (_, v) in zip(keys, point, strict=True)}, seed, resolved)
         jobs.setdefault(job.job_id, job)
     return list(jobs.values())

@@ -13,6 +13,7 @@ from rover_sim.cli.export import export_cmd
 from rover_sim.cli.options import JunitOpt, PlannerOpt, SetOpt, StereoOpt, VoOpt, bad_input
 from rover_sim.cli.orbital import bench_globalloc_cmd, orbital_cmd
 from rover_sim.cli.preflight import preflight
+from rover_sim.cli.scenarios import scenarios_cmd
 from rover_sim.cli.status import finish, guarded
 from rover_sim.cli.view import view_cmd
 from rover_sim.errors import RoverSimError
@@ -20,6 +21,7 @@ from rover_sim.errors import RoverSimError
 app = typer.Typer(help="MER-class rover simulator with a MER-style navigation stack.", no_args_is_help=True)
 app.add_typer(bench_app, name="bench")
 app.command("view")(view_cmd)
+app.command("scenarios")(scenarios_cmd)
 
 RENDER_PX = (16, 2048)  # `render --resolution`: MuJoCo's offscreen buffer is allocated at this size
 
@@ -56,6 +58,7 @@ def render_cmd(
         bad_input(ValueError(f"--pair {pair!r}: choose from {', '.join(pairs)}"))
     if not RENDER_PX[0] <= resolution <= RENDER_PX[1]:  # checked first: too large an offscreen buffer kills MuJoCo
         bad_input(ValueError(f"--resolution {resolution}: allowed {RENDER_PX[0]}..{RENDER_PX[1]} pixels"))
+    preflight("render", dirs={"--out": out})
     try:
         sc = load_scenario(scenario, seed=seed)
     except RoverSimError as e:
@@ -124,31 +127,6 @@ def run_cmd(
     where = f"outputs in {out}/ (plots in {out}/plots/)"
     typer.echo(f"{where}; open the recording with: rover-sim view {out}" if record else where)
     finish(junit, "run", [scenario_case(metrics.deterministic_dict(), "run")])  # status: see rover_sim.cli.status
-
-
-@app.command("scenarios")
-def scenarios_cmd() -> None:
-    """List the scenario catalogue: name, `fast` (in the CI subset) and the first line of the description."""
-    from rover_sim.scenario.loading import catalogue, load_scenario
-
-    names = catalogue()
-    if not names:
-        from rover_sim.resources import scenarios_dir
-
-        bad_input(FileNotFoundError(f"no scenario files (*.toml) in {scenarios_dir()}"))
-    width = max((len(n) for n in names), default=0)
-    bad = False
-    for name in names:
-        try:
-            s = load_scenario(name)
-        except RoverSimError as e:
-            typer.echo(f"{name:<{width}}  ?     invalid: {e}")
-            bad = True
-            continue
-        first = next(iter(s.description.strip().splitlines()), "")
-        typer.echo(f"{name:<{width}}  {'fast' if s.fast else '-   '}  {first}")
-    if bad:
-        raise typer.Exit(code=2)
 
 
 @app.command("demo")

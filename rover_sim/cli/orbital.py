@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from rover_sim.cli.outdir import outputs_or_exit
 from rover_sim.cli.status import ExitStatus, exit_with, guarded
 
 
@@ -19,6 +20,7 @@ def orbital_cmd(
 ) -> None:
     """Orbital products of SCENARIO's site: orthoimage (0.25 m, 16-bit PNG + .pgw), DEM (1 m, float32 TIFF +
     .tfw), orbital.json (frame, sun, error model with sources); a streamed site: tiles along the route."""
+    outputs_or_exit(("--out", out, "dir"))
     with guarded():
         from rover_sim.cli.outdir import prepare_out_dir
         from rover_sim.orbital.files import spec_metadata, write_products
@@ -72,6 +74,7 @@ def bench_globalloc_cmd(
 ) -> None:
     """Global localisation against orbital products over rocky plains, a crater rim, a dune field and a
     featureless plain (flight profile): per-terrain fixes, refusals, false fixes, errors and compute."""
+    outputs_or_exit(("--json", json, "file"), ("--junit", junit, "file"), ("--cache", cache, "dir"))
     with guarded():
         from rover_sim.bench.globalloc import bench_globalloc
         from rover_sim.bench.globalloc_sites import TERRAINS

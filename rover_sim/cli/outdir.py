@@ -1,4 +1,6 @@
-"""``--out`` for ``rover-sim run``: refuse a non-empty directory unless ``--overwrite``, which clears its contents
+"""Output paths of every command, checked before any work: :func:`check_outputs` refuses an ``--out``, ``--json``,
+``--junit`` or ``--png`` that cannot be written (a read-only place, a file where a directory is needed, ...), and
+:func:`prepare_out_dir` refuses a non-empty ``--out`` directory unless ``--overwrite``, which clears its contents
 (never ``/``, the home directory, the repository, the working directory or anything above them, nor any tree
 holding a ``.git``)."""
 
@@ -6,6 +8,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 from rover_sim.errors import RoverSimError
@@ -15,6 +18,59 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 
 class OutDirRefused(RoverSimError):
     """``--out`` names a file, a non-empty directory without ``--overwrite``, or a directory too precious to clear."""
+
+
+class OutputNotWritable(RoverSimError):
+    """An output option names a place that cannot be written; the message names the option and the path."""
+
+
+def _nearest_existing(path: Path) -> Path:
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    return path
+
+
+def write_problem(path: Path, kind: str = "file") -> str | None:
+    """Why ``path`` cannot be written as a ``kind`` ("file" or "dir", created with its parents if missing), or
+    None. A probe file is created and removed in the directory that would receive it."""
+    path = Path(path)
+    if kind == "file" and path.is_dir():
+        return "is a directory, not a file"
+    if kind == "dir" and path.exists() and not path.is_dir():
+        return "is an existing file, not a directory"
+    if kind == "file" and path.is_file() and not os.access(path, os.W_OK):
+        return "the file is not writable"
+    base = _nearest_existing(path if kind == "dir" else path.parent)
+    if not base.is_dir():
+        return f"{base} is a file, not a directory"
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".rover-sim-write-check-", dir=base)
+    except OSError as e:
+        return f"cannot write in {base} ({e.strerror or e})"
+    os.close(fd)
+    os.unlink(probe)
+    return None
+
+
+def check_outputs(*outputs: tuple[str, Path | str | None, str]) -> None:
+    """Raise :class:`OutputNotWritable` for the first ``(option, path, kind)`` whose path cannot be written
+    (``path`` None: the option was not given)."""
+    for option, path, kind in outputs:
+        if path is None or str(path) == "":
+            continue
+        problem = write_problem(Path(path), kind)
+        if problem:
+            raise OutputNotWritable(f"{option} {path}: {problem}")
+
+
+def outputs_or_exit(*outputs: tuple[str, Path | str | None, str]) -> None:
+    """:func:`check_outputs` for a command: an unwritable output is one line on stderr and exit 2."""
+    from rover_sim.cli.status import fail
+
+    try:
+        check_outputs(*outputs)
+    except OutputNotWritable as e:
+        raise fail(e) from None
 
 
 def _protected(d: Path) -> str | None:

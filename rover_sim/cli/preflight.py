@@ -9,51 +9,30 @@ Nothing is created here; the command creates its directories when it writes.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
+from rover_sim.cli.outdir import write_problem
 from rover_sim.cli.status import ExitStatus, fail
 from rover_sim.errors import RoverSimError
 
 PLUGIN_KINDS = ("vo", "stereo", "planner")
 
 
-def _nearest_existing(path: Path) -> Path:
-    p = path.absolute()
-    while not p.exists() and p != p.parent:
-        p = p.parent
-    return p
-
-
 def file_problem(option: str, path: Path | str | None) -> str | None:
     """Why ``option``'s file ``path`` cannot be written (None: it can, or no path was given)."""
     if path is None or str(path) == "":
         return None
-    p = Path(path)
-    if p.is_dir():
-        return f"{option} {p}: is a directory, not a file"
-    if p.exists():
-        return None if os.access(p, os.W_OK) else f"{option} {p}: cannot write it (read-only or no permission)"
-    return _dir_problem(option, p, _nearest_existing(p.parent))
+    problem = write_problem(Path(path), "file")
+    return None if problem is None else f"{option} {path}: {problem}"
 
 
 def dir_problem(option: str, path: Path | str | None) -> str | None:
     """Why ``option``'s output directory ``path`` cannot be written (None: it can, or no path was given)."""
     if path is None or str(path) == "":
         return None
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        return f"{option} {p}: is an existing file, not a directory"
-    return _dir_problem(option, p, _nearest_existing(p))
-
-
-def _dir_problem(option: str, p: Path, base: Path) -> str | None:
-    if not base.is_dir():
-        return f"{option} {p}: {base} is a file, not a directory"
-    if not os.access(base, os.W_OK | os.X_OK):
-        return f"{option} {p}: cannot write in {base} (read-only or no permission)"
-    return None
+    problem = write_problem(Path(path), "dir")
+    return None if problem is None else f"{option} {path}: {problem}"
 
 
 def plugin_problem(kind: str, spec: str | None) -> str | None:

@@ -2,8 +2,10 @@
 
 :func:`stereo_cmd` is the command (typer reads its annotations); :func:`load_pair` and :func:`disparity_from_files`
 are the library functions behind it. The images must be rectified (rows are epipolar lines), the same size, and
-greyscale or convertible to it (8- or 16-bit grey, BGR or BGRA colour). The output is the left-referenced disparity
-in pixels as a float32 ``.npy`` array, NaN where no disparity passed the checks (see :mod:`nav.stereo`).
+greyscale (8- or 16-bit; a 3- or 4-channel file whose colour channels are all equal is grey too). A colour image is
+refused: which grey a colour camera's channels should make depends on the camera, and matching the wrong one
+silently degrades the disparity. The output is the left-referenced disparity in pixels as a float32 ``.npy`` array,
+NaN where no disparity passed the checks (see :mod:`nav.stereo`).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ class StereoInputError(RoverSimError):
 
 
 def load_grey(path: Path) -> np.ndarray:
-    """An image file as 8-bit greyscale (16-bit grey is scaled by 255/65535, colour converted with cv2)."""
+    """An image file as 8-bit greyscale (16-bit grey is scaled by 255/65535); colour is refused."""
     path = Path(path)
     if not path.is_file():
         raise StereoInputError(f"{path}: no such file")
@@ -34,9 +36,15 @@ def load_grey(path: Path) -> np.ndarray:
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[:, :, 0]
     if img.ndim == 3 and img.shape[2] in (3, 4):
-        img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY if img.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+        colour = img[:, :, :3]
+        if not (np.array_equal(colour[:, :, 0], colour[:, :, 1]) and np.array_equal(colour[:, :, 0], colour[:, :, 2])):
+            raise StereoInputError(
+                f"{path}: a colour image; stereo needs a greyscale rectified image (convert it with the weighting "
+                "your camera needs, e.g. cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), and rectify it first)"
+            )
+        img = colour[:, :, 0]
     if img.ndim != 2:
-        raise StereoInputError(f"{path}: {img.shape[2]} channels; need greyscale (1) or colour (3 or 4)")
+        raise StereoInputError(f"{path}: {img.shape[2]} channels; need a greyscale rectified image (1 channel)")
     if img.dtype == np.uint16:
         img = cv2.convertScaleAbs(img, alpha=255.0 / 65535.0)
     if img.dtype != np.uint8:
@@ -69,7 +77,7 @@ def disparity_from_files(left: Path, right: Path, num_disparities: int = 64, win
 
 
 def stereo_cmd(
-    left: Annotated[Path, typer.Argument(help="Left rectified image (PNG, greyscale or colour).")],
+    left: Annotated[Path, typer.Argument(help="Left rectified image (PNG, greyscale; colour is refused).")],
     right: Annotated[Path, typer.Argument(help="Right rectified image, the same size.")],
     num_disparities: Annotated[
         int, typer.Option("--num-disparities", help="Disparities searched: a multiple of 16, at most 256.")

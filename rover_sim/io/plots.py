@@ -5,9 +5,11 @@
 * :func:`plot_paths`: top-down truth / dead-reckoning / VO paths over a hillshade tinted by material, with rock
   outlines and keep-out zones (Fig. 5 / Fig. 7 style).
 * :func:`plot_slip`: slip per step or against time.
+* :func:`plot_run`: the three of a run, titled with its scenario, seed and sensor profile (:func:`run_title`).
 
 Each function writes a PNG (or any format matplotlib knows from the suffix) and returns the ``Figure`` so callers
-and tests can inspect the artists.
+and tests can inspect the artists. The map's legend sits outside the axes, where it cannot cover a rock or a
+keep-out zone, and the map's limits hold every path, also where a path leaves the terrain (drawn blank there).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch
 
 if TYPE_CHECKING:
+    from nav.trajectory import Trajectory
     from terrains import Terrain
 
 DESIGN_FRACTION = 0.10  # MER requirement: position error below 10 % of the distance travelled
@@ -55,7 +58,7 @@ def _figure(size_in: tuple[float, float]) -> Figure:
 def _save(fig: Figure, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI)
+    fig.savefig(path, dpi=DPI, bbox_inches="tight", pad_inches=0.1)  # the legend outside the map's axes included
     return path
 
 
@@ -99,7 +102,7 @@ def plot_error_vs_distance(
         label=f"{100 * design_fraction:g} % of distance",
         gid=DESIGN_LINE_GID,
     )
-    ax.set_xlim(0.0, d_max)
+    ax.set_xlim(0.0, d_max if d_max > 0 else 1.0)
     ax.set_ylim(bottom=0.0)
     ax.set_xlabel("distance travelled (m)")
     ax.set_ylabel("position error (m)")
@@ -116,18 +119,26 @@ def plot_error_vs_distance(
 def _view_bounds(
     terrain: Terrain, xy: list[np.ndarray], keep_out: list[tuple[str, float, float, float]], margin_m: float | None
 ) -> tuple[float, float, float, float]:
-    ox, oy = terrain.origin_xy_m  # a streamed site's window is centred there (the view is clipped to it)
+    """The map's (x0, x1, y0, y1): the paths' and zones' bounding box plus ``margin_m``, clipped to the terrain
+    (a streamed site: its current window) but never so far that a path leaves the view; ``margin_m`` None: the
+    whole terrain, widened likewise."""
+    ox, oy = terrain.origin_xy_m  # a streamed site's window is centred there
     full = (ox - terrain.half_x_m, ox + terrain.half_x_m, oy - terrain.half_y_m, oy + terrain.half_y_m)
-    pts = [p for p in xy if len(p)]
-    pts += [np.array([[x - r, y - r], [x + r, y + r]]) for _, x, y, r in keep_out]
-    if margin_m is None or not pts:
-        return full
-    allp = np.concatenate(pts)
-    allp = allp[np.isfinite(allp).all(axis=1)]
-    if not len(allp):
-        return full
-    lo, hi = allp.min(axis=0) - margin_m, allp.max(axis=0) + margin_m
-    return (max(lo[0], full[0]), min(hi[0], full[1]), max(lo[1], full[2]), min(hi[1], full[3]))
+    paths = [p[np.isfinite(p).all(axis=1)] for p in xy if len(p)]
+    paths = [p for p in paths if len(p)]
+    zones = [np.array([[x - r, y - r], [x + r, y + r]]) for _, x, y, r in keep_out]
+    if margin_m is None or not paths + zones:
+        view = full
+    else:
+        allp = np.concatenate(paths + zones)
+        lo, hi = allp.min(axis=0) - margin_m, allp.max(axis=0) + margin_m
+        view = (max(lo[0], full[0]), min(hi[0], full[1]), max(lo[1], full[2]), min(hi[1], full[3]))
+    if not paths:
+        return view
+    allp = np.concatenate(paths)
+    pad = 0.02 * max(float(np.ptp(allp[:, 0])), float(np.ptp(allp[:, 1])), 1.0)  # a path never on the frame
+    lo, hi = allp.min(axis=0) - pad, allp.max(axis=0) + pad
+    return (min(view[0], lo[0]), max(view[1], hi[0]), min(view[2], lo[1]), max(view[3], hi[1]))
 
 
 def plot_paths(
@@ -165,7 +176,7 @@ def plot_paths(
 
     width, height = x1 - x0, y1 - y0
     aspect = height / width if width > 0 else 1.0
-    fig = _figure((7.0, float(np.clip(7.0 * aspect, 3.5, 10.0)) + 0.6))
+    fig = _figure((9.0, float(np.clip(7.0 * aspect, 3.5, 10.0)) + 0.6))  # 2 in. of the width for the legend
     ax = fig.add_subplot()
     ax.imshow(np.clip(rgb, 0.0, 1.0), origin="lower", extent=extent, interpolation="bilinear")
     handles: list[object] = [
@@ -214,9 +225,11 @@ def plot_paths(
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
+    ax.set_facecolor("white")  # where a path runs off the terrain
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
-    ax.legend(handles=handles, loc="best", fontsize="small", framealpha=0.85)
+    # outside the axes: inside, a legend can cover a rock or a keep-out zone
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize="small")
     ax.set_title(title or "Rover paths")
     _save(fig, path)
     return fig
@@ -255,3 +268,44 @@ def plot_slip(
     ax.set_title(title or "Slip")
     _save(fig, path)
     return fig
+
+
+# ---------------------------------------------------------------------------------------------------- a run
+
+
+def run_title(scenario: str, seed: int, profile: str) -> str:
+    """What every plot of a run is titled with: the scenario, its seed and the sensor profile."""
+    return f"{scenario} (seed {seed}, {profile} profile)"
+
+
+def plot_run(
+    plot_dir: str | Path,
+    title: str,
+    terrain: Terrain,
+    trajectories: Mapping[str, Trajectory],
+    keep_out: Iterable[tuple[str, float, float, float]] = (),
+    slip: tuple[np.ndarray, Mapping[str, np.ndarray]] | None = None,
+) -> dict[str, Figure]:
+    """A run's ``error_vs_distance.png`` (with more than one truth record), ``paths.png`` and, given ``slip``
+    (times, series), ``slip.png`` in ``plot_dir``, each titled ``"<what>: <title>"``. ``trajectories`` hold the
+    same records, ``"truth"`` among them; ``slip`` the samples metrics.json counts
+    (:func:`rover_sim.runtime.evaluator.step_slips`)."""
+    plot_dir = Path(plot_dir)
+    truth = trajectories["truth"]
+    figures: dict[str, Figure] = {}
+    if len(truth) > 1:
+        errors = {
+            n: np.linalg.norm(t.positions_xyz - truth.positions_xyz, axis=1)
+            for n, t in trajectories.items()
+            if n != "truth"
+        }
+        figures["error_vs_distance"] = plot_error_vs_distance(
+            truth.cumulative_distance_m(), errors, plot_dir / "error_vs_distance.png", title=f"Position error: {title}"
+        )
+    positions = {n: t.positions_xyz for n, t in trajectories.items()}
+    figures["paths"] = plot_paths(
+        terrain, positions, plot_dir / "paths.png", keep_out=keep_out, title=f"Paths: {title}"
+    )
+    if slip is not None and len(slip[0]):
+        figures["slip"] = plot_slip(slip[0], slip[1], plot_dir / "slip.png", title=f"Slip per VO step: {title}")
+    return figures

@@ -200,6 +200,18 @@ def rms_position_error_m(estimate: Trajectory, truth: Trajectory) -> float:
     return round(float(np.sqrt(np.mean(d * d))), 4)
 
 
+def step_slips(steps: Sequence[VoStepRecord]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The slip samples of a run's VO steps as ``metrics.json`` counts them (``max_slip_pct``, ``mean_slip_pct``,
+    ``max_vo_slip_pct``) and ``plots/slip.png`` draws them: ``(t_s, true slip, VO slip)``, ratios, one per step
+    commanding more than ``MIN_SLIP_TRAVEL_M`` (a shorter step's ratio divides by almost nothing); the VO slip is
+    NaN where VO did not accept the step."""
+    kept = [s for s in steps if abs(s.commanded_m) > MIN_SLIP_TRAVEL_M]
+    t_s = np.array([s.t_s for s in kept], dtype=float)
+    true = np.array([s.true_slip for s in kept], dtype=float)
+    vo = np.array([s.vo_slip if s.status == "ok" else math.nan for s in kept], dtype=float)
+    return t_s, true, vo
+
+
 def window_slips(truth: Sequence[Pose], commanded_m: Sequence[float], window_m: float = SLIP_WINDOW_M) -> np.ndarray:
     """Slip over consecutive windows of ``window_m`` commanded travel: 1 - true along-heading progress / commanded.
 
@@ -397,10 +409,8 @@ class Evaluator:
         reasons: dict[str, int] = {}
         for s in refused:
             reasons[s.status] = reasons.get(s.status, 0) + 1
-        true_slips = np.array([s.true_slip for s in steps if abs(s.commanded_m) > MIN_SLIP_TRAVEL_M], dtype=float)
-        true_slips = true_slips[np.isfinite(true_slips)]
-        vo_slips = np.array([s.vo_slip for s in accepted if abs(s.commanded_m) > MIN_SLIP_TRAVEL_M], dtype=float)
-        vo_slips = vo_slips[np.isfinite(vo_slips)]
+        _, true_slips, vo_slips = step_slips(steps)
+        true_slips, vo_slips = true_slips[np.isfinite(true_slips)], vo_slips[np.isfinite(vo_slips)]
         if len(true_slips) == 0:  # no VO steps: slip over windows of commanded travel, from the true progress
             true_slips = window_slips(self.truth, self.commanded_m)
             if len(true_slips) == 0:

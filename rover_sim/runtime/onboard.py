@@ -181,6 +181,16 @@ class Onboard:
             self._rectified[camera] = (pair.left_u8, out)
         return out
 
+    def rectifying_calibration(self, obs: Observation, camera: str) -> StereoCalibration | None:
+        """The calibrated models :meth:`rectified` rectifies ``camera``'s pair of ``obs`` with, as things stand:
+        the pair's own, corrected by the camera's epipolar check once its fit is in (after :meth:`rectified` of
+        the pair: exactly what it used); None for a pair that arrives rectified. Observes nothing."""
+        pair = require_observation(obs, "Onboard.rectifying_calibration").pair(camera)
+        if pair.calibration is None:
+            return None
+        check = None if self.epipolar is None else self.epipolar.get(camera)
+        return pair.calibration if check is None else check.calibration(pair.calibration)
+
     def _checks(self, camera: str, refine: EpipolarCheck | None) -> list[EpipolarCheck]:
         """The epipolar checks ``camera``'s pairs go through, in order (the camera's own, then ``refine``)."""
         checks = []

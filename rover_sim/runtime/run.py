@@ -12,8 +12,9 @@ import numpy as np
 from nav.trajectory import write_tum
 from rover_sim import interrupts
 from rover_sim.io.blueprint import RunLayout, blueprint_for
+from rover_sim.io.progress import SimProgress
 from rover_sim.io.recorder_protocol import NullRecorder, Recorder
-from rover_sim.runtime.evaluator import Metrics
+from rover_sim.runtime.evaluator import Metrics, step_slips
 from rover_sim.runtime.runner import Mission
 from rover_sim.scenario.commands import AutonavCmd
 from rover_sim.scenario.schema import Scenario
@@ -55,33 +56,16 @@ def write_outputs(mission: Mission, metrics: Metrics, out_dir: Path) -> None:
     trajs = mission.trajectories()
     for name, tr in trajs.items():
         write_tum(tr, tdir / f"{name}.tum")
-    pdir = out_dir / "plots"
-    pdir.mkdir(exist_ok=True)
-    truth = trajs["truth"]
-    dist = truth.cumulative_distance_m()
-    errors = {
-        n: np.linalg.norm(t.positions_xyz - truth.positions_xyz, axis=1) for n, t in trajs.items() if n != "truth"
-    }
-    if len(truth) > 1:
-        plots.plot_error_vs_distance(dist, errors, pdir / "error_vs_distance.png", title=mission.sc.name)
     keep = [(z.name, z.x_m, z.y_m, z.radius_m) for z in mission.sc.keep_out]
-    plots.plot_paths(
+    t_s, true_slip, vo_slip = step_slips(mission.vo_steps)  # the samples max_slip_pct is taken over
+    plots.plot_run(
+        out_dir / "plots",
+        plots.run_title(mission.sc.name, mission.sc.seed, mission.sc.sensors.profile),
         mission.terrain,
-        {n: t.positions_xyz for n, t in trajs.items()},
-        pdir / "paths.png",
+        trajs,
         keep_out=keep,
-        title=mission.sc.name,
+        slip=(t_s, {"truth": true_slip, "vo": vo_slip}),
     )
-    if mission.vo_steps:
-        ts = np.array([s.t_s for s in mission.vo_steps])
-        plots.plot_slip(
-            ts,
-            {
-                "truth": np.array([s.true_slip for s in mission.vo_steps]),
-                "VO": np.array([s.vo_slip for s in mission.vo_steps]),
-            },
-            pdir / "slip.png",
-        )
 
 
 def setup_interrupted(sc: Scenario, exc: KeyboardInterrupt, wall_s: float) -> Metrics:
@@ -109,6 +93,17 @@ def write_setup_outputs(sc: Scenario, metrics: Metrics, out_dir: Path) -> None:
     (out_dir / "timing.json").write_text(json.dumps({"wall_s": metrics.wall_s}, indent=2))
     (out_dir / "scenario.json").write_text(json.dumps(sc.resolved_dict(), indent=2))
     (out_dir / "events.log").write_text(f"[    0.00s] ERROR: {metrics.reason.removeprefix('run did not complete: ')}\n")
+
+
+def discard_failed_start(rec: Recorder, out_dir: Path | None, created_dir: bool) -> None:
+    """Remove what a run that failed to start wrote: its recording, and ``out_dir`` if the run created it and it is
+    empty now (the identical command can then be run again once the cause is fixed)."""
+    rec.close()
+    if out_dir is None:
+        return
+    (out_dir / "recording.rrd").unlink(missing_ok=True)
+    if created_dir and not any(out_dir.iterdir()):
+        out_dir.rmdir()
 
 
 SOL_TRACK_SPACING_M = 0.1  # a sol's drive: track vertices 10 cm apart ...
@@ -167,8 +162,10 @@ def _run(
     from rover_sim.scenario.loading import load_scenario
 
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
+    created_dir = False
     if out_dir is not None:
         out_dir = Path(out_dir)
+        created_dir = not out_dir.exists()
         out_dir.mkdir(parents=True, exist_ok=True)
     # the recording file must not exist without the code below that finishes it on an interrupt
     with interrupts.deferred() as pending:
@@ -182,18 +179,11 @@ def _run(
             if (record and out_dir)
             else NullRecorder()
         )
-        bar = None
-        if progress:
-            from tqdm import tqdm
-
-            bar = tqdm(
-                desc=sc.name, unit="sim-s", mininterval=1.0,
-                bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]",
-            )  # fmt: skip
+        bar = SimProgress(sc.name) if progress else None  # a bar on a terminal, plain lines in a log
 
     def on_progress(t_s: float, _msg: str) -> None:
-        if bar is not None and t_s - bar.n >= 1.0:
-            bar.update(t_s - bar.n)
+        if bar is not None:
+            bar.update(t_s)
 
     try:
         try:
@@ -214,6 +204,9 @@ def _run(
             if reraise_interrupt:
                 raise
             return metrics
+        except Exception:  # the mission could not start (e.g. a plugin does not load): leave no files behind
+            discard_failed_start(rec, out_dir, created_dir)
+            raise
         try:
             metrics = mission.run()
         finally:

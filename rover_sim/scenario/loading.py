@@ -10,7 +10,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
-from rover_sim.errors import ConfigError
+from rover_sim.errors import ConfigError, UnknownScenario
 from rover_sim.resources import scenarios_dir
 from rover_sim.scenario.schema import Scenario
 
@@ -105,35 +105,62 @@ def plugin_overrides(vo: str | None = None, stereo: str | None = None, planner: 
     return out
 
 
-def scenario_from_dict(data: dict, source: str = "<dict>", overrides: list[str] | None = None) -> Scenario:
+def _blamed_override(loc: str, overrides: list[str], flags: list[str]) -> str | None:
+    """The flag (``--set key=value``, ``--seed N``) whose key the invalid field ``loc`` belongs to, if any: the
+    key's parts appear in order in ``loc`` (a command's type tag may sit between them), or ``loc`` is the start of
+    the key (an unknown key is reported at its first unknown part)."""
+    parts = loc.split(".")
+    for text, flag in reversed(list(zip(overrides, flags, strict=True))):
+        key = parse_override(text)[0].split(".")
+        it = iter(parts)
+        if all(k in it for k in key) or key[: len(parts)] == parts:
+            return flag
+    return None
+
+
+def scenario_from_dict(
+    data: dict, source: str = "<dict>", overrides: list[str] | None = None, flags: list[str] | None = None
+) -> Scenario:
+    """Validate ``data`` with ``overrides`` (``dotted.key=value``) applied. A field made invalid by an override is
+    reported against the flag that set it (``flags[i]`` for ``overrides[i]``; default ``--set <override>``),
+    not against ``source``."""
+    overrides = list(overrides or [])
+    flags = list(flags) if flags is not None else [f"--set {o}" for o in overrides]
     tree = json.loads(json.dumps(data))  # deep copy of plain data
     _normalise_nav(tree)
-    for text in overrides or []:
+    for text in overrides:
         key, value = parse_override(text)
         _set_dotted(tree, key, value)
     try:
         return Scenario.model_validate(tree)
     except ValidationError as err:
         loc, msg = _describe(err)
-        raise ConfigError(source, loc, msg) from None
+        raise ConfigError(_blamed_override(loc, overrides, flags) or source, loc, msg) from None
 
 
-def load_scenario(name_or_path: str | Path, overrides: list[str] | None = None, seed: int | None = None) -> Scenario:
-    """Load ``scenarios/<name>.toml`` or a path; apply ``--set`` overrides and ``--seed``."""
+def load_scenario(
+    name_or_path: str | Path,
+    overrides: list[str] | None = None,
+    seed: int | None = None,
+    flags: list[str] | None = None,
+) -> Scenario:
+    """Load ``scenarios/<name>.toml`` or a path; apply ``--set`` overrides and ``--seed``. An invalid value is
+    reported against its flag: ``flags[i]`` for ``overrides[i]`` (default ``--set <override>``), ``--seed N``."""
     path = Path(name_or_path)
     if not path.suffix:
         path = SCENARIOS_DIR / f"{name_or_path}.toml"
     if not path.is_file():
-        known = ", ".join(sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")))
-        raise ConfigError(str(path), "(file)", f"no such scenario file; known scenarios: {known}")
+        raise UnknownScenario(str(name_or_path), catalogue(), is_name=not Path(name_or_path).suffix)
     try:
         data = tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise ConfigError(str(path), "(syntax)", f"not valid TOML: {err}") from None
     extra = list(overrides or [])
+    flags = list(flags) if flags is not None else [f"--set {o}" for o in extra]
     if seed is not None:
         extra.append(f"seed={seed}")
-    return scenario_from_dict(data, str(path), extra)
+        flags.append(f"--seed {seed}")
+    return scenario_from_dict(data, str(path), extra, flags)
 
 
 def catalogue() -> list[str]:

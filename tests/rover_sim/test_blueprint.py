@@ -31,7 +31,9 @@ def test_hazcam_vo_run_has_no_empty_navcam_view():
 
 
 def test_web_url_points_the_viewer_at_the_local_proxy():
-    assert web_url(9090) == "http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2Flocalhost%3A9876%2Fproxy"
+    # 127.0.0.1, not "localhost" (which a browser may try as ::1 first): the servers listen on IPv4 127.0.0.1
+    assert web_url(9090) == "http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876%2Fproxy"
+    assert web_url(9090, 9876, "0.0.0.0").startswith("http://127.0.0.1:9090/")  # every interface: this one too
 
 
 def test_a_run_without_vo_records_no_vo_series(tmp_path):

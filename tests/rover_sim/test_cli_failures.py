@@ -100,7 +100,7 @@ def test_sigterm_mid_run_stops_cleanly(tiny, tmp_path):
     proc = _start(["run", str(tiny), "--out", str(out), "--junit", str(junit), "--set", "commands.0.distance_m=5"])
     seen: list[str] = []
 
-    def read_stderr() -> None:  # tqdm's progress: "tiny: N sim-s" once the loop runs
+    def read_stderr() -> None:  # progress lines (stderr is a pipe): "tiny: N sim-s, M s" once the loop runs
         while chunk := proc.stderr.read1(4096):
             seen.append(chunk.decode(errors="replace"))
 

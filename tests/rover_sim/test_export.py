@@ -204,12 +204,20 @@ def test_cli_rate_export_leaves_the_run_unchanged(exported, scenario_file, tmp_p
     res = CliRunner().invoke(app, [*args, "--json", str(summary), "--no-progress"])
     assert res.exit_code == 0, res.output
     data = json.loads(summary.read_text())
-    assert set(data) == {"format", "frames", "imu_samples", "duration_s", "out"} and data["format"] == "kitti"
+    assert set(data) == {"format", "frames", "imu_samples", "duration_s", "out", "reason"} and data["format"] == "kitti"
+    assert data["reason"] == json.loads((out / "run" / "metrics.json").read_text())["reason"]
     assert data["frames"] == int(data["duration_s"] * 2) + 1  # 2 Hz from the first tick
     assert len(np.loadtxt(out / "sequences" / "00" / "times.txt")) == data["frames"]
     for name in ("truth", "dead_reckoning", "vo"):  # the noise-free extra renders drew nothing from the run's RNG
         a = (out / "run" / "trajectories" / f"{name}.tum").read_text()
         assert a == (vo_steps_out / "run" / "trajectories" / f"{name}.tum").read_text(), name
+    import cv2
+
+    # the extra renders are rectified like the rover's own pairs (flight profile: raw renders, rectified here): the
+    # first frame, at the same instant as the first VO pair, differs from it by little more than the image noise
+    rate0, vo0 = (cv2.imread(str(d / "sequences" / "00" / "image_0" / "000000.png"), cv2.IMREAD_GRAYSCALE)
+                  for d in (out, vo_steps_out))  # fmt: skip
+    assert np.abs(rate0.astype(float) - vo0).mean() < 2.0  # unrectified raw images: about 7 grey levels
 
 
 @pytest.mark.parametrize(

@@ -123,22 +123,22 @@ def test_bad_parameter_names_the_field_and_the_range():
 
 @pytest.mark.parametrize("case", ["short", pytest.param("msstb", marks=pytest.mark.slow)])
 def test_bench_vo_runs_the_example_vo_beside_mer_vo(tmp_path, monkeypatch, capsys, case):
-    """`rover-sim bench vo --vo examples.opencv_vo:OpenCvStereoVO` on one case over seeds: every variant's
+    """`rover-sim bench vo --vo rover_sim.examples.opencv_vo:OpenCvStereoVO` on one case over seeds: every variant's
     table, the plugin's JSON beside MER VO's. The fast form runs a short sandy-slope case (the tiny scenario, 1.2 m
     with 4 VO steps); `-m slow` runs MSSTB."""
     import json
-    from pathlib import Path
 
     from rover_sim.bench.seeds import Seeds
     from rover_sim.bench.vo import BUILTIN, FULL_POSE, VO_CASES, bench_vo, runs_of
+    from rover_sim.examples import EXAMPLE_VO
 
-    monkeypatch.chdir(Path(__file__).resolve().parents[2])  # the example lives in the repository's examples/
+    monkeypatch.chdir(tmp_path)  # the example ships inside the package: found from any working directory
     scenarios = dict(VO_CASES)
     if case == "short":
         short = dict(TINY, commands=[{"type": "drive", "distance_m": 1.2}], name="tiny_vo_case")
         scenarios = {"short": scenario_from_dict(short)}
     out = tmp_path / "vo.json"
-    plugin = "examples.opencv_vo:OpenCvStereoVO"
+    plugin = EXAMPLE_VO
     seeds = (0,) if case == "short" else (0, 1)
     stacks, _ = bench_vo(str(out), Seeds(seeds, "tuning"), out_root=tmp_path, plugins=[plugin], cases=[case],
                          case_scenarios=scenarios, workers=0)  # fmt: skip

@@ -86,7 +86,7 @@ def png_pair(tmp_path: Path) -> tuple[Path, Path]:
     left, right = textured_pair()
     paths = tmp_path / "left.png", tmp_path / "right.png"
     cv2.imwrite(str(paths[0]), left)
-    cv2.imwrite(str(paths[1]), cv2.cvtColor(right, cv2.COLOR_GRAY2BGR))  # colour is converted
+    cv2.imwrite(str(paths[1]), cv2.cvtColor(right, cv2.COLOR_GRAY2BGR))  # grey stored as BGR is still grey
     return paths
 
 
@@ -123,6 +123,17 @@ def test_stereo_command_errors_name_the_file(png_pair: tuple[Path, Path], tmp_pa
     res = runner.invoke(cli_app(), ["stereo", *map(str, png_pair), "--num-disparities", "40", "--out", out])
     assert res.exit_code == 2 and "num_disparities" in res.output
     assert not Path(out).exists()
+
+
+def test_colour_input_is_an_error_naming_the_file(png_pair: tuple[Path, Path], tmp_path: Path) -> None:
+    left, _ = textured_pair()
+    colour = cv2.merge([left, np.roll(left, 3, axis=1), 255 - left])  # channels differ: a colour image
+    cv2.imwrite(str(tmp_path / "colour.png"), colour)
+    out = tmp_path / "d.npy"
+    res = CliRunner().invoke(cli_app(), ["stereo", str(tmp_path / "colour.png"), str(png_pair[1]), "--out", str(out)])
+    assert res.exit_code == 2, res.output
+    assert "colour.png" in res.output and "greyscale rectified image" in res.output
+    assert not out.exists()
 
 
 def test_load_grey_conversions_and_rejections(tmp_path: Path) -> None:

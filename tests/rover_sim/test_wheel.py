@@ -166,3 +166,30 @@ def test_wheel_runs_a_scenario_by_name(installed):
     )
     assert "msstb_rock_course: PASS" in res.stdout
     assert (out / "metrics.json").is_file() and (out / "recording.rrd").is_file()
+
+
+def test_wheel_ships_the_example_vo(installed):
+    """The example VO the CLI help names is a module of the wheel (``examples/`` at the top of a checkout is not
+    packaged, so it must live inside ``rover_sim``)."""
+    from rover_sim.examples import EXAMPLE_VO
+
+    module = EXAMPLE_VO.split(":")[0]
+    with zipfile.ZipFile(installed["wheel"]) as z:
+        assert f"{module.replace('.', '/')}.py" in z.namelist()
+
+
+@pytest.mark.slow
+def test_wheel_loads_the_example_vo_by_its_documented_name(installed):
+    """From the installed wheel, outside the checkout: the name in ``bench vo --help`` loads the example VO."""
+    from rover_sim.examples import EXAMPLE_VO
+
+    probe = (
+        "from rover_sim.runtime.plugins import resolve\n"
+        f"cls = resolve({EXAMPLE_VO!r})\n"
+        "import nav.protocols, sys\n"
+        "print(sys.modules[cls.__module__].__file__, isinstance(cls(), nav.protocols.VisualOdometer))\n"
+    )
+    where, is_vo = _run([installed["python"], "-c", probe], installed["tmp"]).stdout.split()
+    assert Path(where).resolve().is_relative_to(installed["site"].resolve()) and is_vo == "True"
+    help_text = _run([installed["bin"] / "rover-sim", "bench", "vo", "--help"], installed["tmp"]).stdout
+    assert EXAMPLE_VO in " ".join(help_text.replace("│", " ").split())

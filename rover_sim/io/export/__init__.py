@@ -20,6 +20,11 @@ Which pairs become frames:
 Every stream's timestamps are strictly increasing (:class:`~rover_sim.io.export.base.Stream`): of equal stamps the
 first image and the last pose are kept. Ground truth comes from the same ticks the run's evaluator records, so it
 equals the run's ``trajectories/truth.tum`` (written beside the dataset in ``OUT/run/``).
+
+Images are always the rectified pairs the onboard stack uses (the flight profile's raw renders are rectified with
+the calibration the onboard stack holds at that moment), and the camera poses written with them (KITTI ``Tr`` and
+``poses/``, EuRoC ``T_BS``, the bag's ``/tf_static``, the Kalibr files) are the true poses of those rectified
+cameras (:mod:`rover_sim.io.export.camera_truth`), not of the physical cameras.
 """
 
 from __future__ import annotations
@@ -31,10 +36,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from nav.rectify import rectification
 from nav.trajectory import Pose
 from nav.types import ImuSample
+from rover_sim import interrupts
 from rover_sim.errors import RoverSimError
 from rover_sim.io.export.base import DatasetWriter, ExportMeta, Frame, Stream
+from rover_sim.io.export.camera_truth import true_rectified_pose
 
 if TYPE_CHECKING:
     from rover_sim.render.renderer import StereoFrame, StereoRenderer
@@ -54,7 +62,9 @@ class ExportOptionError(RoverSimError, ValueError):
     """A bad export option; the message names the option and the allowed values."""
 
 
-def check_options(fmt: str, camera: str, rate_hz: float | None, at_vo_steps: bool = False) -> None:
+def check_options(
+    fmt: str, camera: str, rate_hz: float | None, at_vo_steps: bool = False, openvins: bool = False
+) -> None:
     if fmt not in FORMATS:
         raise ExportOptionError(f"--format {fmt!r}: choose one of {', '.join(FORMATS)}")
     if camera not in CAMERAS:
@@ -63,11 +73,13 @@ def check_options(fmt: str, camera: str, rate_hz: float | None, at_vo_steps: boo
         raise ExportOptionError("--rate-hz and --at-vo-steps exclude each other: give one of them (or neither)")
     if rate_hz is not None and not (0.0 < rate_hz <= MAX_RATE_HZ):
         raise ExportOptionError(f"--rate-hz {rate_hz:g}: must be > 0 and <= {MAX_RATE_HZ:g} (the tick rate)")
+    if openvins and fmt != "euroc":
+        raise ExportOptionError(f"--openvins writes OpenVINS's files beside a EuRoC export: --format euroc, not {fmt}")
 
 
-def make_writer(fmt: str, out: Path) -> DatasetWriter:
-    """The writer of ``fmt`` rooted at ``out`` (KITTI: ``out/sequences``, EuRoC: ``out/mav0``, ROS 2:
-    ``out/rosbag2``)."""
+def make_writer(fmt: str, out: Path, openvins: bool = False) -> DatasetWriter:
+    """The writer of ``fmt`` rooted at ``out`` (KITTI: ``out/sequences``, EuRoC: ``out/mav0`` and the Kalibr files
+    beside it, with ``openvins`` OpenVINS's too; ROS 2: ``out/rosbag2``)."""
     check_options(fmt, CAMERAS[0], None)
     out = Path(out)
     if fmt == "kitti":
@@ -77,7 +89,7 @@ def make_writer(fmt: str, out: Path) -> DatasetWriter:
     if fmt == "euroc":
         from rover_sim.io.export.euroc import EurocWriter
 
-        return EurocWriter(out)
+        return EurocWriter(out, openvins=openvins)
     from rover_sim.io.export.rosbag2 import Rosbag2Writer
 
     return Rosbag2Writer(out / "rosbag2")
@@ -107,10 +119,11 @@ class ExportSummary:
     duration_s: float
     out: str
     dropped_duplicates: int = 0  # samples dropped because their timestamp repeated an earlier one
+    reason: str = ""  # the run's metrics.reason: "run did not complete: interrupted (SIGTERM)" for a cut-short one
 
     def to_json(self) -> dict:
         return {"format": self.format, "frames": self.frames, "imu_samples": self.imu_samples,
-                "duration_s": self.duration_s, "out": self.out}  # fmt: skip
+                "duration_s": self.duration_s, "out": self.out, "reason": self.reason}  # fmt: skip
 
 
 class DatasetSink:
@@ -122,17 +135,27 @@ class DatasetSink:
         self.camera, self.rate_hz = camera, rate_hz
         self.mission: Mission | None = None
         self.next_due_s: float | None = None
-        self.frames: Stream[Frame] = Stream(self.each("frame"))
+        self.frames: Stream[Frame] = Stream(self.each("frame", whole=True))
         self.imu: Stream[ImuSample] = Stream(self.each("imu"))
         self.enc: Stream[tuple] = Stream(lambda item: [w.encoders(*item) for w in self.writers])
         self.gt: Stream[Pose] = Stream(self.each("truth"), keep="last")
         self.dr: Stream[Pose] = Stream(lambda p: [w.estimate("dead_reckoning", p) for w in self.writers], keep="last")
         self.vo: Stream[Pose] = Stream(lambda p: [w.estimate("vo", p) for w in self.writers], keep="last")
 
-    def each(self, method: str):  # noqa: ANN201
+    def each(self, method: str, whole: bool = False):  # noqa: ANN201
+        """Hand an item to every writer's ``method``. ``whole``: Ctrl-C or SIGTERM is held until every writer has
+        written it (a frame is several files and index lines: an interrupted export keeps whole frames only)."""
+
         def emit(item: object) -> None:
-            for w in self.writers:
-                getattr(w, method)(item)
+            if not whole:
+                for w in self.writers:
+                    getattr(w, method)(item)
+                return
+            with interrupts.deferred() as pending:
+                for w in self.writers:
+                    getattr(w, method)(item)
+            if pending.exc is not None:
+                raise pending.exc
 
         return emit
 
@@ -181,7 +204,7 @@ class DatasetSink:
             while self.next_due_s <= obs.t_s + 1e-9:
                 self.next_due_s += period
             f = render_without_noise(mission.world.renderer, self.camera)
-            self.frames.push(f.t_s, Frame(f.t_s, self.camera, f.left, f.right, f.rig, f.rig.left.T_rover_cam, truth))
+            self.push_frame(mission.world.observation_with([], [], {self.camera: f}), truth, rectify=True)
 
     def on_vo(self, _step: object, _T_rover_cam: object) -> None:
         """After a VO step: the corrected onboard pose replaces the one of the same stamp."""
@@ -190,12 +213,35 @@ class DatasetSink:
             self.vo.push(pose.t_s, pose)
 
     def on_images(self, obs: Observation, truth: Pose) -> None:
-        if self.camera not in obs.images or self.mission is None:
-            return
-        pair = self.mission.onboard.rectified(obs, self.camera)  # flight profile: raw pairs exported rectified
-        true_rig = self.mission.world.renderer.rig(self.camera)  # the mast as it physically stands
-        frame = Frame(pair.t_s, self.camera, pair.left_u8, pair.right_u8, pair.rig, true_rig.left.T_rover_cam, truth)
-        self.frames.push(pair.t_s, frame)
+        if self.camera in obs.images and self.mission is not None:
+            self.push_frame(obs, truth, rectify=False)
+
+    def push_frame(self, obs: Observation, truth: Pose, rectify: bool) -> None:
+        """The pair of ``obs`` as the onboard stack rectifies it, with the true poses of the rectified cameras.
+
+        ``rectify`` False: a pair the rover takes, rectified by the onboard stack itself (as its stereo and VO
+        use it). True: an extra render, rectified here with the calibration the onboard stack holds now, without
+        showing it to the onboard stack (its epipolar check must not see pairs the rover never took)."""
+        mission = self.mission
+        assert mission is not None, "attach() the sink first"
+        onboard, camera = mission.onboard, self.camera
+        if rectify:
+            raw, calib = obs.pair(camera), onboard.rectifying_calibration(obs, camera)
+            rect = None if calib is None else rectification(calib)
+            left, right = (raw.left_u8, raw.right_u8) if rect is None else rect.apply(raw.left_u8, raw.right_u8)
+            rig = raw.rig if rect is None else rect.rig
+        else:
+            pair = onboard.rectified(obs, camera)  # flight profile: raw pairs exported rectified
+            left, right, rig = pair.left_u8, pair.right_u8, pair.rig
+            calib = onboard.rectifying_calibration(obs, camera)  # what that pair was rectified with
+        true_rig = mission.world.renderer.rig(camera)  # the mast as it physically stands
+        T_left, T_right = true_rig.left.T_rover_cam, true_rig.right.T_rover_cam
+        truth_lens = mission.world.calibration
+        if calib is not None and truth_lens is not None:  # rectified through calibrated models: the rectified cameras
+            T_left = true_rectified_pose(rig.left, calib.left, truth_lens.true_model(true_rig.left))
+            T_right = true_rectified_pose(rig.right, calib.right, truth_lens.true_model(true_rig.right))
+        t_s = obs.pair(camera).t_s
+        self.frames.push(t_s, Frame(t_s, camera, left, right, rig, T_left, T_right, true_rig.left.T_rover_cam, truth))
 
     def close(self, fmt: str = "", out: str = "") -> ExportSummary:
         """Flush the held-back poses and close every writer."""
@@ -219,9 +265,14 @@ def export_scenario(
     seed: int | None = None,
     overrides: list[str] | None = None,
     progress: bool = False,
+    openvins: bool = False,
 ) -> ExportSummary:
     """Run ``scenario`` with a :class:`DatasetSink` writing ``formats`` into ``out`` (which must be empty or new);
-    the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``."""
+    the run's own outputs (metrics, ``trajectories/*.tum``, plots) go to ``out/run/``; ``openvins``: OpenVINS's
+    calibration files beside a EuRoC export's Kalibr files. Nothing is written if the
+    mission cannot start (e.g. a plugin does not load). ``summary.reason`` is the run's ``metrics.reason``: an
+    interrupted run (Ctrl-C, SIGTERM) leaves the dataset written up to the interrupt and says so there."""
+    from rover_sim.io.progress import SimProgress
     from rover_sim.runtime.run import write_outputs
     from rover_sim.runtime.runner import Mission
     from rover_sim.scenario.loading import load_scenario
@@ -229,26 +280,24 @@ def export_scenario(
 
     for fmt in formats:
         check_options(fmt, camera, rate_hz)
+    if openvins and "euroc" not in formats:
+        raise ExportOptionError("--openvins writes OpenVINS's files beside a EuRoC export: include the euroc format")
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario, overrides, seed)
     out = Path(out)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise ExportOptionError(f"--out {out}: exists and is not an empty directory; give a new one")
-    out.mkdir(parents=True, exist_ok=True)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(desc=f"export {sc.name}", unit="sim-s", mininterval=1.0,
-                   bar_format="{desc}: {n:.0f} sim-s [{elapsed}, {rate_fmt}]")  # fmt: skip
+    bar = SimProgress(f"export {sc.name}") if progress else None  # a bar on a terminal, plain lines in a log
 
     def on_progress(t_s: float, _msg: str) -> None:
-        if bar is not None and t_s - bar.n >= 1.0:
-            bar.update(t_s - bar.n)
+        if bar is not None:
+            bar.update(t_s)
 
     try:
         mission = Mission(sc, progress=on_progress)
         try:
-            sink = DatasetSink([make_writer(f, out) for f in formats], camera, rate_hz).attach(mission)
+            out.mkdir(parents=True, exist_ok=True)
+            writers = [make_writer(f, out, openvins and f == "euroc") for f in formats]
+            sink = DatasetSink(writers, camera, rate_hz).attach(mission)
             try:
                 metrics = mission.run()
             finally:
@@ -259,4 +308,4 @@ def export_scenario(
         if bar is not None:
             bar.close()
     write_outputs(mission, metrics, out / "run")
-    return summary
+    return dataclasses.replace(summary, reason=metrics.reason)

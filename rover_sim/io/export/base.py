@@ -34,9 +34,13 @@ def t_ns(t_s: float) -> int:
 class Frame:
     """One exported stereo pair.
 
-    ``rig`` is the camera model flight software held (intrinsics, baseline: the calibration to publish);
-    ``T_rover_cam`` the *true* pose of the left camera on the rover at capture (differs from ``rig`` only by
-    the mast's servo error); ``truth`` the true rover pose at capture.
+    ``rig`` is the camera model flight software held (intrinsics, baseline: the calibration to publish; the
+    images are rectified for it). ``T_rover_cam`` / ``T_rover_right_cam`` are the *true* poses on the rover, at
+    capture, of the cameras the exported images are: on the flight profile the rectified cameras
+    (:mod:`rover_sim.io.export.camera_truth`), which differ from the physical ones by the mounting, rectifying and
+    calibration rotations; on the ideal profile the physical cameras (they differ from ``rig`` only by the
+    mast's servo error). ``T_rover_cam_physical`` is the physical left camera (the MJCF camera at the true mast
+    pose); ``truth`` the true rover pose at capture.
     """
 
     t_s: float
@@ -45,19 +49,14 @@ class Frame:
     right_u8: np.ndarray
     rig: StereoRig
     T_rover_cam: np.ndarray
+    T_rover_right_cam: np.ndarray
+    T_rover_cam_physical: np.ndarray
     truth: Pose
 
     @property
     def T_world_cam(self) -> np.ndarray:
-        """True pose of the left camera in the world."""
+        """True pose of the left image's camera in the world."""
         return self.truth.as_matrix() @ self.T_rover_cam
-
-    @property
-    def T_rover_right_cam(self) -> np.ndarray:
-        """True pose of the right camera on the rover (``baseline_m`` along the left camera's +x)."""
-        shift = np.eye(4)
-        shift[0, 3] = self.rig.baseline_m
-        return self.T_rover_cam @ shift
 
 
 @dataclass(frozen=True)

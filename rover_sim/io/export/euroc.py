@@ -8,11 +8,15 @@
     OUT/mav0/wheels0/data.csv, sensor.yaml                   wheel spin and steering angles (rad), commanded mast
     OUT/mav0/state_groundtruth_estimate0/data.csv            true rover pose p_RS_R, q_RS (w first), velocity by
                                                              central differences; biases written as 0
+    OUT/camchain-imucam.yaml, OUT/imu.yaml                   Kalibr camera-IMU chain and IMU noise
+    OUT/kalibr_imucam_chain.yaml, kalibr_imu_chain.yaml      the same for OpenVINS (T_imu_cam), with ``openvins``
 
 The body frame B is the rover frame, which is also the IMU frame (``imu0`` has T_BS = identity). ``T_BS`` of a
 camera is its pose on the rover (``p_B = T_BS p_S``, as in EuRoC), taken at the first frame (the navcam moves
-with the mast: re-pointing it mid-run is not reflected). The images are rectified: ``distortion_coefficients``
-are zero. R, the ground-truth reference frame, is the simulator's world (x east, y north, z up).
+with the mast: re-pointing it mid-run is not reflected): the true pose of the *rectified* camera the images are
+in (:mod:`rover_sim.io.export.camera_truth`); cam0's ``T_BS_physical_camera`` is the physical camera's, for
+reference. The images are rectified: ``distortion_coefficients`` are zero. R, the ground-truth reference frame,
+is the simulator's world (x east, y north, z up). The Kalibr/OpenVINS files: :mod:`rover_sim.io.export.kalibr`.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import numpy as np
 from nav.trajectory import Pose
 from nav.types import EncoderSample, ImuSample
 from rover_sim.io.export.base import MAST_JOINTS, STEER_JOINTS, WHEEL_JOINTS, DatasetWriter, ExportMeta, Frame, t_ns
+from rover_sim.io.export.kalibr import gyro_random_walk, write_calibration
 
 GT_HEADER = (
     "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
@@ -51,8 +56,9 @@ def matrix_yaml(name: str, T: np.ndarray) -> str:
 class EurocWriter(DatasetWriter):
     name = "euroc"
 
-    def __init__(self, out: Path) -> None:
-        self.mav = Path(out) / "mav0"
+    def __init__(self, out: Path, openvins: bool = False) -> None:
+        self.root, self.openvins = Path(out), openvins
+        self.mav = self.root / "mav0"
         self.meta: ExportMeta | None = None
         dirs = ("cam0/data", "cam1/data", "imu0", "wheels0", "state_groundtruth_estimate0")
         for d in dirs:
@@ -113,7 +119,7 @@ class EurocWriter(DatasetWriter):
 
     def write_yaml(self) -> None:
         meta = self.meta or ExportMeta("", 0, "", "")
-        gyro_walk = meta.gyro_bias_sigma * np.sqrt(2.0 / max(meta.gyro_bias_corr_time_s, 1e-9))
+        gyro_walk = gyro_random_walk(meta)
         imu = (
             "sensor_type: imu\n"
             + comment("rover IMU (LN-200 class); body frame = rover frame (x forward, y left, z up)")
@@ -135,6 +141,7 @@ class EurocWriter(DatasetWriter):
         )  # fmt: skip
         (self.mav / "wheels0" / "sensor.yaml").write_text(wheels)
         f = self.first_frame
+        write_calibration(self.root, f, meta, self.openvins)
         if f is None:
             return
         span = self.frame_t[-1] - self.frame_t[0]
@@ -145,9 +152,10 @@ class EurocWriter(DatasetWriter):
                 "sensor_type: camera\n"
                 + comment(
                     f"{f.camera} {'left' if i == 0 else 'right'}, rectified greyscale (frames: {meta.mode}; "
-                    "rate_hz is the mean rate)"
+                    "rate_hz is the mean rate); T_BS: the true pose of the rectified camera the images are in"
                 )
                 + matrix_yaml("T_BS", T)
+                + (matrix_yaml("T_BS_physical_camera", f.T_rover_cam_physical) if i == 0 else "")
                 + f"rate_hz: {rate:.4f}\nresolution: [{cam.width_px}, {cam.height_px}]\ncamera_model: pinhole\n"
                 + f"intrinsics: [{cam.fx_px:.9f}, {cam.fy_px:.9f}, {cam.cx_px:.9f}, {cam.cy_px:.9f}]"
                 + "  # fu, fv, cu, cv\n"

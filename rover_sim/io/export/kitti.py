@@ -12,7 +12,10 @@
                                           camera's frame (KITTI convention: T_cam0(0)_cam0(k))
 
 There are no colour cameras: P2/P3 repeat P0/P1 so that KITTI readers find all four. ``Tr`` (velodyne -> cam0 in
-KITTI) holds the rover (body/IMU) frame -> left camera transform at the first frame. ``times.txt`` keeps the
+KITTI) holds the rover (body/IMU) frame -> left camera transform at the first frame. "Left camera" in ``Tr`` and
+``poses/`` is the camera the exported images are in: on the flight profile the true pose of the *rectified* left
+camera (:mod:`rover_sim.io.export.camera_truth`), which differs from the physical navcam by the mounting,
+rectifying and calibration rotations. ``times.txt`` keeps the
 simulation clock (it does not restart at 0) so it lines up with ``imu.csv``, ``wheels.csv`` and ``truth.tum``.
 """
 

@@ -14,7 +14,8 @@ topic                               type                        content
 /odom/vo                            nav_msgs/Odometry           onboard VO-corrected pose (estimate; VO runs only)
 /tf                                 tf2_msgs/TFMessage          ground truth ``world`` -> ``rover`` (8 Hz)
 /tf_static                          tf2_msgs/TFMessage          ``rover`` -> camera optical frames (latched;
-                                                                republished if the mast moves the navcam)
+                                                                republished if the mast moves the navcam): the
+                                                                true rectified cameras the images are in
 ==================================  ==========================  ==================================================
 
 Stamps are simulation time (header stamp = bag receive time). The odometry carries each estimate's own stamp (the

@@ -1,4 +1,5 @@
-"""The "bring your own VO" example (examples/opencv_vo.py) on the synthetic stereo scenes of tests/nav/vo_synth.py.
+"""The "bring your own VO" example (rover_sim/examples/opencv_vo.py) on the synthetic stereo scenes of
+tests/nav/vo_synth.py.
 
 Same scene, rig, motion and (deliberately wrong) dead-reckoning prediction as tests/nav/test_vo_pipeline.py, with the
 built-in MER VO run on the same frames for comparison. Tolerances for the example: 1.5 cm and 0.25 deg on a 0.30 m /
@@ -8,14 +9,19 @@ built-in MER VO run on the same frames for comparison. Tolerances for the exampl
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
-from vo_synth import make_rig, make_terrain, motion_error, render_pair, rover_pose
 
-from examples.opencv_vo import OpenCvStereoVO
 from nav.geometry import rpy_to_R, se3
 from nav.protocols import VisualOdometer, check_vo_result
 from nav.vo import VisualOdometry
+from rover_sim.examples.opencv_vo import OpenCvStereoVO
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "nav"))  # the synthetic scenes of tests/nav
+from vo_synth import make_rig, make_terrain, motion_error, render_pair, rover_pose  # noqa: E402
 
 RIG = make_rig()
 STEP = se3(rpy_to_R(np.radians(0.5), np.radians(-1.0), np.radians(3.0)), np.array([0.30, 0.03, 0.01]))

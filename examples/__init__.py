@@ -1,1 +1,0 @@
-"""Examples of user-supplied parts for the onboard stack (see examples/README.md)."""
