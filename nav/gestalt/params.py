@@ -44,7 +44,7 @@ class GestaltParams:
     max_step_m: float = 0.22
     # Stereo loses a rock's narrow top (map.apex_lift_m): a peak's top is raised by its flank slope times
     # apex_reach_rad x range. 0.065 rad is half the 9 px SAD window of the 256^2 hazcams (4.5 px / 69.4 px focal
-    # length), from the stereo's geometry, not tuned; None turns the correction off. The slope is capped at 1.5
+    # length), from the stereo's geometry, not tuned; 0 or None turns the correction off. The slope is capped at 1.5
     # (56 deg: steeper flanks are stereo noise at a depth edge, not rock).
     apex_reach_rad: float | None = 0.065
     apex_max_slope: float = 1.5
