@@ -51,7 +51,7 @@ goodness map), :mod:`nav.gestalt.arcs` (the arcs and their traversability votes,
 
 from nav.gestalt.arbiter import Decision, GestaltPlanner, arbitrate, undoes, waypoint_votes
 from nav.gestalt.arcs import Arc, ArcVotes, arc_pose, arcs, closest_approach, goal_arc, vote_arcs
-from nav.gestalt.map import GoodnessMap, GoodnessWindow, fit_patch_planes, goodness_from, patch_step_m
+from nav.gestalt.map import GoodnessMap, GoodnessWindow, apex_lift_m, fit_patch_planes, goodness_from, patch_step_m
 from nav.gestalt.params import GestaltParams
 from nav.gestalt.path_cost import CostToGo, cost_to_go
 
@@ -66,6 +66,7 @@ __all__ = [
     "GoodnessWindow",
     "arbitrate",
     "arc_pose",
+    "apex_lift_m",
     "arcs",
     "closest_approach",
     "cost_to_go",

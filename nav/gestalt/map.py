@@ -1,7 +1,8 @@
 """Steps 1-2 of GESTALT (Maimone et al. 2005, section 4.2): "Range images from stereo are converted to goodness
 or traversability maps" - the world-fixed toroidal grid of per-cell range-point statistics ("the usual modulo
 map indexing", :meth:`GoodnessMap.update`) and, per cell of the window round the rover, the least-squares
-patch plane whose tilt, RMS residual and step give its goodness (:meth:`GoodnessMap.evaluate`).
+patch plane whose tilt, RMS residual and step give its goodness (:meth:`GoodnessMap.evaluate`), the step taken
+with each peak's top raised by what stereo loses at it (:func:`apex_lift_m`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,9 @@ from nav.gestalt.params import GestaltParams
 # moments binned per cell, offsets (dx, dy) from the cell centre, z world elevation
 _MOMENTS = ("n", "dx", "dy", "z", "dxdx", "dxdy", "dydy", "dxz", "dyz", "zz")
 _NO_CELL = np.iinfo(np.int64).min
+# a peak needs this many known neighbours (of 8) for the apex correction: a cone seen from one side has its front
+# and flanks (5); the corner of a region of data on a tilted plane has 3
+_APEX_MIN_NEIGHBOURS = 4
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -180,6 +184,10 @@ class GoodnessMap:
         a, b, c = (arr[inner] for arr in fit[:3])
         tilt_deg = np.degrees(np.arctan(np.hypot(a, b)))
         roughness_m = fit[3][inner]
+        lift = apex_lift_m(extremes, obs_range, p)
+        if lift is not None:
+            extremes = extremes.copy()
+            extremes[3] = extremes[3] + lift
         step_m = patch_step_m(extremes, a, b, c, p)
         count = moments[0][inner]
         known = fit[4][inner] & (count >= p.min_points_per_cell)
@@ -247,6 +255,52 @@ def fit_patch_planes(moments: np.ndarray, params: GestaltParams) -> tuple[np.nda
     c = mz - a * mx - b * my
     rms = np.sqrt(np.maximum(czz - a * cxz - b * cyz, 0.0))
     return a, b, c, rms, ok
+
+
+def apex_lift_m(extremes: np.ndarray, obs_range_m: np.ndarray, params: GestaltParams) -> np.ndarray | None:
+    """Height that stereo lost at the top of each peak, per cell: flank slope times the matching window's reach.
+
+    A correlation window straddling a depth edge matches the farther surface or fails a check, so area stereo
+    loses up to half a window at an object's border (Hirschmueller, Innocent & Garibaldi 2002, "Real-time
+    correlation-based stereo vision with reduced border errors", IJCV 47); this pipeline's depth-edge check and blob
+    filter then drop what is left of a rock's narrow top. On a cone or tetrahedron that is the apex: stereo reads
+    a 25-29 cm rock's top 8-13 cm low (``docs/navigation/autonav-tall-rocks.md``). The lost half-window spans
+    ``apex_reach_rad * range`` on the ground, over which the rock keeps rising at its flank slope; so at a cell
+    whose (trimmed) top is higher than every known neighbour's top (at least ``_APEX_MIN_NEIGHBOURS`` of the 8
+    known: the ground behind a rock is in its shadow), the top is raised by ``s * apex_reach_rad * range``: ``s``
+    the median slope from it down to those neighbours' tops, capped at ``apex_max_slope``; ``range`` the distance
+    from which the cell was seen. A dome's or a ledge's top is flat (small ``s``), a cone's steep; on a clean
+    plane no cell with that many neighbours is a peak. ``extremes`` and ``obs_range_m`` as
+    :meth:`GoodnessMap._gather` returns them (unknown: top -inf, range NaN). None when ``apex_reach_rad`` is None
+    (off).
+    """
+    p = params
+    if p.apex_reach_rad is None:
+        return None
+    top = extremes[3]
+    n0, n1 = top.shape
+    padded = np.pad(top, 1, constant_values=-np.inf)
+    slopes = np.full((8, n0, n1), np.nan)
+    peak = np.isfinite(top)
+    k = 0
+    for ox in (-1, 0, 1):
+        for oy in (-1, 0, 1):
+            if ox == 0 and oy == 0:
+                continue
+            nb = padded[1 + ox : 1 + ox + n0, 1 + oy : 1 + oy + n1]
+            known = np.isfinite(nb) & np.isfinite(top)
+            drop = np.where(known, top - np.where(known, nb, 0.0), np.nan)
+            peak &= ~(drop < 0)
+            slopes[k] = drop / (p.cell_size_m * np.hypot(ox, oy))
+            k += 1
+    count = np.isfinite(slopes).sum(axis=0)
+    # median of the known neighbours' slopes (NaN sorts last)
+    ordered = np.sort(slopes, axis=0)
+    lo = np.take_along_axis(ordered, np.maximum((count - 1) // 2, 0)[None], axis=0)[0]
+    hi = np.take_along_axis(ordered, np.maximum(count // 2, 0)[None], axis=0)[0]
+    slope = np.clip(np.where(count > 0, 0.5 * (lo + hi), 0.0), 0.0, p.apex_max_slope)
+    lift = slope * p.apex_reach_rad * np.nan_to_num(obs_range_m, nan=0.0)
+    return np.where(peak & (count >= _APEX_MIN_NEIGHBOURS), lift, 0.0)
 
 
 def patch_step_m(

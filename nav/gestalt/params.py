@@ -42,6 +42,12 @@ class GestaltParams:
     # a rock's top some centimetres low (the SAD window smooths it), so the limit sits below: rocks >= 25 cm seen
     # 1-2 m ahead read >= 0.28 m (10th percentile over five fields), 10-15 cm rocks <= 0.23 m (90th).
     max_step_m: float = 0.22
+    # Stereo loses a rock's narrow top (map.apex_lift_m): a peak's top is raised by its flank slope times
+    # apex_reach_rad x range. 0.065 rad is half the 9 px SAD window of the 256^2 hazcams (4.5 px / 69.4 px focal
+    # length), from the stereo's geometry, not tuned; 0 or None turns the correction off. The slope is capped at 1.5
+    # (56 deg: steeper flanks are stereo noise at a depth edge, not rock).
+    apex_reach_rad: float | None = 0.065
+    apex_max_slope: float = 1.5
 
     # --- arcs ---
     n_forward_arcs: int = 23  # paper
@@ -117,6 +123,10 @@ class GestaltParams:
         for name in ("tilt_deg", "roughness_m", "step_m"):
             if not getattr(self, f"benign_{name}") < getattr(self, f"max_{name}"):
                 raise ValueError(f"need benign_{name} < max_{name}")
+        if self.apex_reach_rad is not None and not 0.0 <= self.apex_reach_rad < 0.5:
+            raise ValueError(f"apex_reach_rad={self.apex_reach_rad}: use 0 <= value < 0.5 rad, or None (off)")
+        if self.apex_max_slope < 0:
+            raise ValueError(f"apex_max_slope={self.apex_max_slope}: use >= 0")
         if self.n_forward_arcs < 1 or self.n_backward_arcs < 0:
             raise ValueError("need at least one forward arc and a non-negative number of backward arcs")
         if self.look_ahead_m + self.rover_half_width_m >= self.map_size_m / 2:
