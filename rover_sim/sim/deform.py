@@ -46,6 +46,7 @@ from rover_sim.sim.wr_kernel import (  # noqa: F401 - the rut's shape constants,
     P_BASE,
     P_CELL,
     P_SCALE,
+    P_UPDATE,
     P_WALL_TAN,
     P_WIDTH,
     P_X0,
@@ -63,9 +64,13 @@ _RENDER, _LOG = 0, 1  # rows of the dirty-cell boxes: one per consumer
 
 
 class DeformableTerrain:
-    """The heightfield of ``sim`` made deformable; ``heights_m()`` is the current surface (same grid as the terrain)."""
+    """The heightfield of ``sim`` made deformable; ``heights_m()`` is the current surface (same grid as the terrain).
 
-    def __init__(self, sim: RoverSim, deformable_materials: tuple[bool, ...]) -> None:
+    ``wheels`` names the wheel bodies ``wheel_<w>`` in the law's order (the rover's six by default; the single-wheel
+    rig has one); ``update_m`` is the contact travel between a wheel's rut writes."""
+
+    def __init__(self, sim: RoverSim, deformable_materials: tuple[bool, ...], wheels: tuple[str, ...] = WHEELS,
+                 update_m: float = UPDATE_M) -> None:  # fmt: skip
         m, t = sim.model, sim.terrain
         self.model = m
         hid = m.hfield("terrain").id
@@ -81,21 +86,23 @@ class DeformableTerrain:
         self._soft = np.ascontiguousarray(np.asarray(deformable_materials, dtype=bool)[mats])
         self._soft_material = np.asarray(deformable_materials, dtype=bool)
         self._hf = m.hfield_data
-        self._last = np.tile([np.inf, np.inf, 0.0], (6, 1))  # contact x, y and sinkage at each wheel's last write
-        self._zf = np.zeros(6)  # sinkage low-passed over SINK_FILTER_S (load spikes of vibration do not dig)
-        params = np.zeros(8)  # wr_kernel.P_* entries
+        n = len(wheels)
+        self._last = np.tile([np.inf, np.inf, 0.0], (n, 1))  # contact x, y and sinkage at each wheel's last write
+        self._zf = np.zeros(n)  # sinkage low-passed over SINK_FILTER_S (load spikes of vibration do not dig)
+        params = np.zeros(9)  # wr_kernel.P_* entries
         params[P_CELL], params[P_X0], params[P_Y0] = self._cell, self._x0, self._y0
         params[P_BASE] = float(m.geom("terrain").pos[2])
         params[P_SCALE] = float(m.hfield_size[hid][2])  # elevation range
         params[P_ALPHA] = sim.timestep_s / (SINK_FILTER_S + sim.timestep_s)
         params[P_WIDTH] = sim.law.width_m
         params[P_WALL_TAN] = math.tan(math.radians(REPOSE_DEG))
+        params[P_UPDATE] = update_m
         self._params = params
         self.enabled = True
         # (valid, i0, i1, j0, j1) cells changed since pop_dirty_cells (row _RENDER) / pop_dirty_cells_for_log (_LOG)
         self._dirty = np.zeros((2, 5), dtype=np.int64)
         self._xpos = sim.data.xpos  # body positions (a live view): the wheel centres
-        self._wheel_ids = np.array([m.body(f"wheel_{w}").id for w in WHEELS], dtype=np.int64)
+        self._wheel_ids = np.array([m.body(f"wheel_{w}").id for w in wheels], dtype=np.int64)
 
     # ------------------------------------------------------------------ state
     def heights_m(self) -> np.ndarray:

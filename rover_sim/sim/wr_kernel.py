@@ -36,8 +36,9 @@ OUT_LOAD, OUT_SINKAGE, OUT_SLIP, OUT_LONG, OUT_LAT, OUT_CONTACT, OUT_TORQUE = ra
 # columns of the per-material constants (WheelSoilLaw.consts): C_K the longitudinal curve's short scale, C_K0 its
 # initial one (soil_tables.SoilParams.initial_shear_modulus_m, for the shear spring's damping), C_KY the lateral K_y
 C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0 = range(8)
-# entries of the deformable terrain's float parameters (DeformableTerrain)
-P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_WALL_TAN = range(8)
+# entries of the deformable terrain's float parameters (DeformableTerrain); P_UPDATE the contact travel between rut
+# writes (UPDATE_M for the rover)
+P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_WALL_TAN, P_UPDATE = range(9)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for a double
 
 
@@ -288,7 +289,7 @@ def write_rut(h: np.ndarray, h0: np.ndarray, soft: np.ndarray, hfield: np.ndarra
     cell, base, scale, width, wall_tan = p[P_CELL], p[P_BASE], p[P_SCALE], p[P_WIDTH], p[P_WALL_TAN]
     # ahead: the patch plus the travel until the next write and a cell; behind the same, so a wheel that digs in
     # without advancing has a pit its rim does not touch at the back either (the ground plate sees the floor)
-    front, half_w = 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
+    front, half_w = 0.5 * lp + p[P_UPDATE] + 1.5 * cell, 0.5 * width
     back = front
     shoulder = half_w + z / wall_tan  # the rut's walls stand at the soil's angle of repose
     reach = shoulder + py_max(BERM_CELLS * cell, BERM_SPREAD * z)
@@ -349,7 +350,7 @@ def deform_after_law(
     dirty: np.ndarray,
 ) -> None:
     """Per physics step, after the law: each loaded wheel on deformable soil reads the rut depth ahead of it into
-    the law's presink (``law_state[4]``) and, once its contact has moved ``UPDATE_M`` or its low-passed sinkage
+    the law's presink (``law_state[4]``) and, once its contact has moved ``p[P_UPDATE]`` or its low-passed sinkage
     ``zf`` grew 1 mm since its last write (``last`` (n, 3): x, y, sinkage), writes its rut (:func:`write_rut`)."""
     nrow, ncol = h.shape
     presink_m, patch_m = law_state[4], law_state[3]
@@ -370,12 +371,13 @@ def deform_after_law(
         along = (sd[7 * w + 4] - cx) * hx + (sd[7 * w + 5] - cy) * hy
         px, py = cx + along * hx, cy + along * hy
         lp = patch_m[w]
-        lead = 0.5 * lp + UPDATE_M + 2.5 * cell  # beyond this wheel's own footprint
+        update = p[P_UPDATE]
+        lead = 0.5 * lp + update + 2.5 * cell  # beyond this wheel's own footprint
         i, j = _cell_of(px + lead * hx, py + lead * hy, p, nrow, ncol)
         presink_m[w] = py_max(h0[i, j] - h[i, j], 0.0)
         lx, ly, lz = last[w, 0], last[w, 1], last[w, 2]
         z = zf[w] = zf[w] + alpha * (law_out[1, w] - zf[w])
-        if (px - lx) ** 2 + (py - ly) ** 2 < UPDATE_M * UPDATE_M and z < lz + 0.001:
+        if (px - lx) ** 2 + (py - ly) ** 2 < update * update and z < lz + 0.001:
             continue
         last[w, 0], last[w, 1], last[w, 2] = px, py, z
         write_rut(h, h0, soft, hfield, adr, p, dirty, px, py, hx, hy, z, lp)
