@@ -44,6 +44,24 @@ def mobility_cases(result: dict) -> list[Case]:
     return out
 
 
+def wheel_cases(result: dict) -> list[Case]:
+    """`bench wheel`: one case per wheel, band and quantity, one per wheel's 0 deg monotonicity; a failure's
+    message is the verdict's reason (rover_sim.mission.acceptance.judge_wheel)."""
+    out = []
+    for name, w in result["wheels"].items():
+        for band in acceptance.WHEEL.bands:
+            for q in acceptance.WHEEL_QUANTITIES:
+                v = w["rmse_by_band"][band.key][q]
+                if v is not None:
+                    why = next((r for r in result["reasons"] if r.startswith(f"{name} {band.key} deg: {q} ")), "")
+                    out.append(case(f"{name} {band.key} deg {q}", "bench.wheel", not why, why))
+        why = next((r for r in result["reasons"] if r.startswith(f"{name} 0 deg: drawbar")), "")
+        out.append(case(f"{name} 0 deg drawbar pull non-decreasing in slip", "bench.wheel", not why, why))
+    if not out:
+        out.append(case("bench wheel", "bench.wheel", result["passed"], "; ".join(result["reasons"])))
+    return out
+
+
 def vo_cases(results: dict) -> list[Case]:
     """One case per VO case for MER VO (flight profile), and per case for each plugin (``bench.vo.<plugin>``);
     the ideal-profile and full-pose comparison runs are reported, not judged."""

@@ -52,12 +52,13 @@ from functools import lru_cache
 
 import numpy as np
 
-from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_table
+from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_table, hegedus_coefficients
 from rover_sim.sim.terramechanics import pack_inputs  # noqa: F401 - the same input layout as the default law
 from rover_sim.sim.wr_kernel import table_lookup, wr_wheels
 
 __all__ = [
-    "BEDROCK", "DRIFT", "MATERIALS", "MIXED", "SAND", "SoilParams", "WheelParams", "WheelSoilLaw", "WheelSoilState",
+    "BEDROCK", "CMU_SAND", "DRIFT", "K10_MINI_GROUSER", "K10_MINI_SMOOTH", "MATERIALS", "MIXED", "SAND", "SoilParams",
+    "WheelParams", "WheelSoilLaw", "WheelSoilState",
 ]
 
 # Loose Martian sand. Inside the published ranges (REFERENCE.md section 2: c 0.2-1 kPa, phi 28-37 deg, K 1-2.5 cm,
@@ -153,6 +154,34 @@ DRIFT = SoilParams(
 # Index order matches terrains.Material (SAND=0, BEDROCK=1, MIXED=2, DRIFT=3); rocks are treated as BEDROCK.
 MATERIALS: tuple[SoilParams, ...] = (SAND, BEDROCK, MIXED, DRIFT)
 
+# The laboratory sand of the CMU single-wheel tests (benchmarks/data/cmu_single_wheel; `rover-sim bench wheel`), on
+# Earth: the same law as the rover's soils, its own parameter set. CALIBRATED by scripts/calibrate_cmu_soil.py on
+# the 0 and 90 deg rows of those tests only (30 and 60 deg held out; docs/physics/wheel-validation.md), inside the
+# published ranges of REFERENCE.md section 2; density 1330 kg/m^3 as reported by the data's authors (not fitted).
+CMU_SAND = SoilParams(
+    name="cmu_sand",
+    cohesion_pa=590.0,
+    friction_angle_deg=28.5,
+    shear_modulus_m=0.019,
+    lateral_shear_modulus_m=0.019,
+    k_c=1.26e4,
+    k_phi=2.2e6,
+    n0=1.17,
+    n1=0.28,
+    a0=0.41,
+    a1=0.27,
+    density_kg_m3=1330.0,
+    gravity_m_s2=9.81,
+    rebound_ratio=0.39,
+    smooth_rim_friction=0.8,
+)
+
+# The K10-mini wheel of those tests: radius 0.058 m to the base of the grousers, width 0.05 m, 5 mm grousers or a
+# smooth rim (the data's README and its source's model parameters; the number of grousers is not given there and
+# the law does not use it). A rigid rim: no flat patch.
+K10_MINI_GROUSER = WheelParams(radius_m=0.058, width_m=0.05, grouser_height_m=0.005, flat_patch_m=0.0)
+K10_MINI_SMOOTH = WheelParams(radius_m=0.058, width_m=0.05, grouser_height_m=0.0, flat_patch_m=0.0)
+
 # BOW_M (the advance over which the front-loaded, resisting stress distribution forms) and the other per-step
 # constants live with the compiled arithmetic in rover_sim/sim/wr_kernel.py.
 _STATE_ROWS = ("jx", "jy", "bow", "patch", "presink")  # rows of WheelSoilLaw.state_arrays()
@@ -209,10 +238,11 @@ class WheelSoilLaw:
                     m.n0,
                     m.n1,
                     m.initial_shear_modulus_m,
+                    *hegedus_coefficients(m),
                 )
             )
         self._tables = np.ascontiguousarray(tables)  # (materials, N_SLIP * N_LOAD, 7)
-        self._consts = np.array(consts, dtype=float)  # (materials, 8): wr_kernel.C_* columns
+        self._consts = np.array(consts, dtype=float)  # (materials, 11): wr_kernel.C_* columns
         self.reset()
 
     def reset(self) -> None:
@@ -260,7 +290,8 @@ class WheelSoilLaw:
         )
 
     def lookup(self, material: int, load_n: float, slip: float) -> tuple[float, ...]:
-        """Steady state at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, Fb/W)."""
+        """Steady state at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, lateral sinkage m
+        at lateral slip ``|slip| LAT_SLIP_MAX``)."""
         return table_lookup(self._tables[material], float(self._consts[material, 0]), float(load_n), float(slip))
 
     def sinkage_m(self, normal_force_n: float, material: int, slip: float) -> float:

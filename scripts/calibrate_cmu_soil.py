@@ -1,0 +1,230 @@
+"""Calibrate the wheel–soil law's parameter set for the CMU laboratory sand (``CMU_SAND``) on the 0 and 90 deg rows.
+
+Data: ``benchmarks/data/cmu_single_wheel/single_wheel_tests.csv`` (both wheels, the K10-mini's geometry fixed, not
+fitted). Fitted on the conditions at slip angles 0 and 90 deg ONLY (each condition's three trials averaged: mean
+load, slip and carriage speed); 30 and 60 deg are held out and only predicted. Also the leave-one-slip-angle-out
+RMSE: for each angle, a fit on the other three (a local refinement from the 0/90 fit), scored on the one left out.
+
+Model: the law's steady state (rover_sim/sim/wr_kernel.py, steps 1-5, at their fixed points), computed point-wise
+from the same integrals the tables are built from (:func:`rover_sim.sim.soil_tables.integrate`,
+:func:`~rover_sim.sim.soil_tables.lateral_sinkage`, :func:`rover_sim.sim.wr_kernel.side_wall_n`), so that an
+evaluation takes a fraction of a second; ``rover-sim bench wheel`` then runs the fitted set on the rig itself.
+
+Objective: the sum over wheel, fitted slip angle and quantity (drawbar pull / load, lateral force / load, sinkage)
+of ``(RMSE / bar)^2``, each bar that of the tightest acceptance band holding the angle
+(:class:`rover_sim.mission.acceptance.WheelBar`: 0.10 / 0.20 / 8 mm up to 30 deg, 0.25 / 0.50 / 12 mm at 90 deg).
+
+Bounds: the published ranges (REFERENCE.md section 2: c 0.2-1 kPa, phi 28-37 deg, K 1-2.5 cm, k_c 1e3-1.4e4,
+k_phi 8e5-2.3e6, n about 1 (0.8-1.2 here); Wong & Reece 1967: a0 0.3-0.5, a1 0-0.4; Ding et al. 2011: n1 0-1;
+rebound ratio 0-0.6 (Wong 2008); smooth-rim skin friction 0.4-1 (Potyondy 1961)); density 1330 kg/m^3 as reported
+by the data's authors, gravity 9.81 m/s^2 (a laboratory bin), both fixed.
+
+Usage: ``python scripts/calibrate_cmu_soil.py [--quick] [--json runs/calibrate_cmu_soil.json]``; prints the fitted
+set, the RMSE per wheel and slip angle (fitted and held out) and the leave-one-out RMSE. Seeded (deterministic).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import differential_evolution, minimize
+
+from rover_sim.bench.wheel_data import WheelTest, read_tests
+from rover_sim.mission.acceptance import WHEEL
+from rover_sim.sim.soil_tables import (
+    LAT_SLIP_MAX,
+    SoilParams,
+    WheelParams,
+    first_sinkage_carrying,
+    hegedus_coefficients,
+    integrate,
+    lateral_sinkage,
+    sinkage_grid,
+)
+from rover_sim.sim.terramechanics_wr import CMU_SAND
+from rover_sim.sim.wheel_rig import wheel_rate_rad_s
+from rover_sim.sim.wr_kernel import side_wall_n
+
+FIT_ANGLES = (0.0, 90.0)
+ALL_ANGLES = (0.0, 30.0, 60.0, 90.0)
+# (name, lower, upper): the fitted parameters and their published ranges (module docstring)
+PARAMETERS = (
+    ("cohesion_pa", 200.0, 1000.0),
+    ("friction_angle_deg", 28.0, 37.0),
+    ("shear_modulus_m", 0.01, 0.025),
+    ("lateral_shear_modulus_m", 0.01, 0.025),
+    ("k_c", 1.0e3, 1.4e4),
+    ("k_phi", 8.0e5, 2.3e6),
+    ("n0", 0.8, 1.2),
+    ("n1", 0.0, 1.0),
+    ("a0", 0.3, 0.5),
+    ("a1", 0.0, 0.4),
+    ("rebound_ratio", 0.0, 0.6),
+    ("smooth_rim_friction", 0.4, 1.0),
+)
+QUANTITIES = ("drawbar_over_load", "lateral_over_load", "sinkage_mm")
+
+
+def conditions(tests: list[WheelTest]) -> list[dict]:
+    """Each condition's trials averaged: wheel, geometry, slip angle, slip, load, speed and the measured means."""
+    groups: dict[str, list[WheelTest]] = {}
+    for t in tests:
+        groups.setdefault(t.condition, []).append(t)
+    out = []
+    for ts in groups.values():
+        def mean(f, ts=ts):  # noqa: E306
+            return float(np.mean([f(t) for t in ts]))
+
+        out.append({
+            "wheel": ts[0].wheel, "geometry": ts[0].geometry, "beta": ts[0].slip_angle_deg,
+            "slip": mean(lambda t: t.slip), "load": mean(lambda t: t.load_n), "v": mean(lambda t: t.travel_speed_m_s),
+            "drawbar_over_load": mean(lambda t: t.drawbar_pull_n / t.load_n),
+            "lateral_over_load": mean(lambda t: t.lateral_force_n / t.load_n),
+            "sinkage_mm": mean(lambda t: t.sinkage_mm),
+        })  # fmt: skip
+    return out
+
+
+def _solve(soil: SoilParams, wheel: WheelParams, load: float, slip: float) -> tuple[float, ...]:
+    """(z, H/W, R/W, L, A) at (load, slip): the table's entries, without the table."""
+    zs = sinkage_grid(soil)
+    z = float(first_sinkage_carrying(np.array([load]), integrate(soil, wheel, zs, slip)["W"], zs)[0])
+    q = integrate(soil, wheel, np.array([z]), slip)
+    w = float(q["W"][0])
+    return z, float(q["H"][0]) / w, float(q["R"][0]) / w, float(q["L"][0]), float(q["A"][0])
+
+
+def steady_state(soil: SoilParams, wheel: WheelParams, load: float, rim: float, v_x: float, v_y: float):
+    """The law's steady (drawbar pull / load, lateral force / load, sinkage mm) at rim speed ``rim``, hub speeds
+    ``v_x`` (along the heading) and ``v_y`` (sideways): steps 1-5 of the kernel at their fixed points."""
+    V = max(abs(rim), abs(v_x), abs(v_y))
+    i_m, lat = (rim - v_x) / V, abs(v_y) / V
+    z, h, rr, length, area = _solve(soil, wheel, load, i_m)
+    n_i = soil.n0 + soil.n1 * abs(i_m)
+    if lat > 0.0:
+        s_all = min(math.hypot(i_m, lat), LAT_SLIP_MAX)
+        z_all, z_long = (float(lateral_sinkage(soil, wheel, np.array([load]), s)[0]) for s in (s_all, abs(i_m)))
+        if z_all > z_long:
+            deeper = z + (z_all - z_long)
+            rr *= (deeper / z) ** (1.0 + n_i)
+            z = deeper
+    bow = 1.0 if v_x > 1e-9 else (-1.0 if v_x < -1e-9 else 0.0)
+    f_long = h - rr * bow
+    f_max = (soil.cohesion_pa * area + load * math.tan(math.radians(soil.friction_angle_deg))) / load
+    q = lat * length / soil.lateral_shear_modulus_m
+    mob = 1.0 - (1.0 - math.exp(-q)) / q if q > 1e-6 else 0.5 * q
+    f_lat = mob * f_max
+    if math.hypot(h, f_lat) > f_max:
+        f_lat *= f_max / math.hypot(h, f_lat)
+    d1, d2, gamma = hegedus_coefficients(soil)
+    wall = side_wall_n(z, wheel.radius_m, soil.cohesion_pa, d1, d2, gamma) / load
+    f_lat += (1.0 - math.exp(-q)) * wall
+    return f_long, f_lat, 1000.0 * z
+
+
+def predict(soil: SoilParams, conds: list[dict]) -> list[tuple[float, float, float]]:
+    out = []
+    for c in conds:
+        b = math.radians(c["beta"])
+        rim = wheel_rate_rad_s(c["slip"], c["v"], c["geometry"].radius_m) * c["geometry"].radius_m
+        out.append(steady_state(soil, c["geometry"], c["load"], rim, c["v"] * math.cos(b), c["v"] * math.sin(b)))
+    return out
+
+
+def _bar(angle: float) -> tuple[float, float, float]:
+    band = next(b for b in WHEEL.bands if angle <= b.max_slip_angle_deg)
+    return band.drawbar_over_load, band.lateral_over_load, band.sinkage_mm
+
+
+def rmse_table(conds: list[dict], pred: list[tuple[float, float, float]]) -> dict[str, dict[str, list[float]]]:
+    """``table[wheel][angle] = [RMSE drawbar/load, lateral/load, sinkage mm]`` over the conditions."""
+    out: dict[str, dict[str, list[float]]] = {}
+    for w in dict.fromkeys(c["wheel"] for c in conds):
+        for a in sorted({c["beta"] for c in conds}):
+            idx = [k for k, c in enumerate(conds) if c["wheel"] == w and c["beta"] == a]
+            if idx:
+                out.setdefault(w, {})[f"{a:g}"] = [
+                    float(math.sqrt(np.mean([(pred[k][q] - conds[k][QUANTITIES[q]]) ** 2 for k in idx])))
+                    for q in range(3)
+                ]
+    return out
+
+
+def objective_of(table: dict[str, dict[str, list[float]]]) -> float:
+    return sum((e / bar) ** 2 for per in table.values() for a, errs in per.items()
+               for e, bar in zip(errs, _bar(float(a)), strict=True))  # fmt: skip
+
+
+def soil_of(x: np.ndarray, base: SoilParams = CMU_SAND) -> SoilParams:
+    return replace(base, **{name: float(v) for (name, _, _), v in zip(PARAMETERS, x, strict=True)})
+
+
+def fit(conds: list[dict], x0: np.ndarray, seed: int, maxiter: int, popsize: int) -> tuple[np.ndarray, float]:
+    bounds = [(lo, hi) for _, lo, hi in PARAMETERS]
+
+    def loss(x: np.ndarray) -> float:
+        return objective_of(rmse_table(conds, predict(soil_of(x), conds)))
+
+    r = differential_evolution(loss, bounds, seed=seed, maxiter=maxiter, popsize=popsize, tol=1e-7, polish=False,
+                               x0=np.clip(x0, [b[0] for b in bounds], [b[1] for b in bounds]))  # fmt: skip
+    return r.x, float(r.fun)
+
+
+def refine(conds: list[dict], x0: np.ndarray, maxfev: int) -> np.ndarray:
+    """A local refinement (Powell, within the bounds) from ``x0`` on ``conds``."""
+    bounds = [(lo, hi) for _, lo, hi in PARAMETERS]
+    r = minimize(lambda x: objective_of(rmse_table(conds, predict(soil_of(x), conds))), x0, method="Powell",
+                 bounds=bounds, options={"maxfev": maxfev, "xtol": 1e-3, "ftol": 1e-4})  # fmt: skip
+    return r.x
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="A short search (for a smoke test): 3 generations.")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--json", default="runs/calibrate_cmu_soil.json")
+    ap.add_argument("--no-loo", action="store_true", help="Skip the leave-one-slip-angle-out refits.")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    conds = conditions(read_tests())
+    train = [c for c in conds if c["beta"] in FIT_ANGLES]
+    x0 = np.array([getattr(CMU_SAND, name) for name, _, _ in PARAMETERS])
+    maxiter, popsize = (3, 5) if args.quick else (40, 8)
+    x, obj = fit(train, x0, args.seed, maxiter, popsize)
+    soil = soil_of(x)
+    table = rmse_table(conds, predict(soil, conds))
+    print(f"fitted on {len(train)} conditions (slip angles {FIT_ANGLES}); objective {obj:.3f}")
+    print("CMU_SAND = SoilParams(" + ", ".join(f"{n}={getattr(soil, n):.4g}" for n, _, _ in PARAMETERS) + ", ...)")
+    for name, lo, hi in PARAMETERS:
+        print(f"  {name:24s} {getattr(soil, name):10.4g}   range {lo:g} .. {hi:g}")
+    print("| wheel | slip angle | set | drawbar / load | lateral / load | sinkage (mm) |")
+    for w, per in table.items():
+        for a, e in per.items():
+            role = "fitted" if float(a) in FIT_ANGLES else "held out"
+            print(f"| {w} | {a} | {role} | {e[0]:.3f} | {e[1]:.3f} | {e[2]:.1f} |")
+    loo: dict[str, dict] = {}
+    if not args.no_loo:
+        for a in ALL_ANGLES:
+            rest = [c for c in conds if c["beta"] != a]
+            xa = refine(rest, x, maxfev=60 if args.quick else 400)
+            held = [c for c in conds if c["beta"] == a]
+            loo[f"{a:g}"] = rmse_table(held, predict(soil_of(xa), held))
+            print(f"leave out {a:g} deg: " + "; ".join(
+                f"{w} {e[f'{a:g}'][0]:.3f} / {e[f'{a:g}'][1]:.3f} / {e[f'{a:g}'][2]:.1f} mm"
+                for w, e in loo[f"{a:g}"].items()))  # fmt: skip
+    result = {"fit_angles_deg": list(FIT_ANGLES), "objective": obj, "soil": asdict(soil),
+              "rmse_by_wheel_and_angle": table, "leave_one_angle_out": loo, "seed": args.seed,
+              "wall_s": time.perf_counter() - t0}  # fmt: skip
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(result, indent=2))
+    print(f"written {args.json} ({result['wall_s']:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
