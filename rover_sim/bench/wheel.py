@@ -174,7 +174,8 @@ def plot(path: str, tests: list[WheelTest], rows: list[dict], sweeps: dict) -> N
     angles = sorted({t.slip_angle_deg for t in tests})
     names = list(dict.fromkeys(t.wheel for t in tests))
     colours = dict(zip(names, ["tab:orange", "tab:blue", "tab:green", "tab:red", "tab:purple"], strict=False))
-    fig, axes = plt.subplots(3, len(angles), figsize=(3.6 * len(angles), 8.4), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(3, len(angles), figsize=(3.6 * len(angles), 8.4), squeeze=False, sharex=True,
+                             layout="constrained")  # fmt: skip
     labels = ("drawbar pull / load", "lateral force / load", "sinkage (mm)")
     for col, a in enumerate(angles):
         for name in names:
@@ -212,8 +213,8 @@ def plot(path: str, tests: list[WheelTest], rows: list[dict], sweeps: dict) -> N
             axes[q, col].grid(alpha=0.3)
             axes[q, 0].set_ylabel(labels[q])
     axes[0, 0].legend(fontsize=7, loc="upper left")
-    fig.suptitle("bench wheel: single-wheel rig (the rover's law, soil bin) vs measured CMU tests", fontsize=10)
-    fig.tight_layout()
+    fig.suptitle("bench wheel: the single-wheel rig (the rover's wheel-soil law in a soil bin) against the measured "
+                 "tests; dotted at 0 deg: the monotonicity sweep", fontsize=10)  # fmt: skip
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -29,7 +29,7 @@ first, then ``WINDOW_M`` measured), in a fresh soil bin for every run.
 Run-in: the law's shear states relax toward their steady values over a contact length of travel, first order, so
 from rest they take about four contact lengths (up to 0.45 m for the CMU wheel dragged) to get within 2 % of them.
 A rig run starts them at their steady values for the imposed kinematics (``j_x = i L`` with the law's mobilised
-slip ``i``, ``j_y`` from its sideways renewal; :meth:`WheelRig.run_in`), as a long run-in would leave them; the
+slip ``i``, ``j_y = -v_y L / V`` sideways; :meth:`WheelRig.run_in`), as a long run-in would leave them; the
 sinkage, the ruts and the compaction bow still develop over the settling travel. ``tests`` check that a run from
 rest over a long travel reaches the same values.
 """
@@ -201,16 +201,16 @@ class WheelRig:
 
     def run_in(self, rim_m_s: float, v_x_m_s: float, v_y_m_s: float, load_n: float) -> None:
         """Set the law's shear states to their steady values for rim speed ``U``, hub speeds ``v_x`` (along the
-        heading) and ``v_y`` (toward the wheel's left) under ``load_n``: ``j_x = (U - v_x) L / V`` with ``V`` the
-        largest of the three speeds, ``j_y = -v_y / (|v_x| / L + |v_y| / b)``, ``L`` the table's patch length (the
-        fixed points of steps 1-2 of :mod:`rover_sim.sim.terramechanics_wr`)."""
+        heading) and ``v_y`` (toward the wheel's left) under ``load_n``: ``j_x = (U - v_x) L / V`` and
+        ``j_y = -v_y L / V`` with ``V`` the largest of the three speeds and ``L`` the table's patch length (the fixed
+        points of steps 1-2 of :mod:`rover_sim.sim.terramechanics_wr`)."""
         V = max(abs(rim_m_s), abs(v_x_m_s), abs(v_y_m_s))
-        i_m = (rim_m_s - v_x_m_s) / V if V > 0.0 else 0.0
+        if V <= 0.0:
+            return
+        i_m = (rim_m_s - v_x_m_s) / V
         patch = self.law.lookup(0, load_n, i_m)[4]
         state = self.law.state_arrays()
-        rate_y = abs(v_x_m_s) / patch + abs(v_y_m_s) / self.wheel.width_m
-        state[0, 0], state[3, 0] = i_m * patch, patch
-        state[1, 0] = -v_y_m_s / rate_y if rate_y > 0.0 else 0.0
+        state[0, 0], state[1, 0], state[3, 0] = i_m * patch, -v_y_m_s * patch / V, patch
 
     def run(self, run: RigRun, settle_m: float = SETTLE_M, window_m: float = WINDOW_M,
             run_in: bool = True) -> RigResult:  # fmt: skip

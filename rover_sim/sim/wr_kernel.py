@@ -38,8 +38,9 @@ BERM_SPREAD = 5.0  # a berm is at least this many rut depths wide
 OUT_LOAD, OUT_SINKAGE, OUT_SLIP, OUT_LONG, OUT_LAT, OUT_CONTACT, OUT_TORQUE = range(7)
 # columns of the per-material constants (WheelSoilLaw.consts): C_K the longitudinal curve's short scale, C_K0 its
 # initial one (soil_tables.SoilParams.initial_shear_modulus_m, for the shear spring's damping), C_KY the lateral K_y,
-# C_D1, C_D2 Hegedus's bulldozing coefficients and C_GAMMA the soil's unit weight (soil_tables.hegedus_coefficients)
-C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0, C_D1, C_D2, C_GAMMA = range(11)
+# C_D1, C_D2 Hegedus's bulldozing coefficients and C_GAMMA the soil's unit weight (soil_tables.hegedus_coefficients),
+# C_SKIN the soil's skin friction on a smooth face, tan(delta) / tan(phi) (the wheel's side walls)
+C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0, C_D1, C_D2, C_GAMMA, C_SKIN = range(12)
 LAT_COLUMN = 6  # the table's lateral-sinkage column (soil_tables.build_table)
 # entries of the deformable terrain's float parameters (DeformableTerrain); P_UPDATE the contact travel between rut
 # writes (UPDATE_M for the rover), P_FRONT how far beyond half its patch and that travel a rut is written ahead of
@@ -190,7 +191,7 @@ def wr_wheels(
     wheel (world frame, at the contact point) and the soil torque about its axle into ``forces`` (n, 4).
 
     ``sd``: the wheel-soil sensor block of ``models/mer/rover.xml``. ``tables`` (materials, N_SLIP * N_LOAD, 7),
-    ``consts`` (materials, 11: ``C_*`` columns). ``state`` (5, n): rows jx, jy, bow, patch length, presink (the
+    ``consts`` (materials, 12: ``C_*`` columns). ``state`` (5, n): rows jx, jy, bow, patch length, presink (the
     rut depth ahead, set by the deformable terrain), updated in place; ``vf`` (n, 3) the low-passed rim,
     longitudinal and lateral speeds; ``out`` (7, n) the ``OUT_*`` rows; ``axles`` (n, 3) each wheel's lateral
     unit vector of its last contact.
@@ -235,36 +236,41 @@ def wr_wheels(
         patch_m[w] = L + PATCH_RELAX * (Lp - L)
         lat = abs(jy) / L
         n_i = n0 + n1 * abs(i_m)
-        if lat > 0.0:  # lateral sinkage; the compaction resistance grows as Bekker's compaction work, z^(n+1)
+        if lat > 0.0:  # lateral sinkage; at the same load the compaction resistance grows as sqrt(z) (Bekker)
             s_all = math.sqrt(i_m * i_m + lat * lat)
             z_all = table_lookup(rows, inv_du, W, py_min(s_all / LAT_SLIP_MAX, 1.0))[LAT_COLUMN]
             z_long = table_lookup(rows, inv_du, W, py_min(abs(i_m) / LAT_SLIP_MAX, 1.0))[LAT_COLUMN]
             if z_all > z_long:
                 z_deeper = z + (z_all - z_long)
-                rn *= (z_deeper / z) ** (1.0 + n_i)
+                rn *= math.sqrt(z_deeper / z)
                 z = z_deeper
-        # step 3: compaction resistance as a reaction, reduced in an earlier rut (Bekker's compaction work)
+        # step 3: compaction resistance as a reaction, reduced in an earlier rut (Bekker's compaction work); the
+        # side wall pushing soil sideways (step 4) also rubs along it as the wheel advances (Coulomb, skin friction)
         bow = py_min(py_max(bow_m[w] + v_x * dt_s, -BOW_M), BOW_M)
         bow_m[w] = bow
+        q = abs(jy) / Ky
+        wall = 0.0
+        if q > 0.0:
+            wall = (1.0 - math.exp(-q)) * side_wall_n(z, r, coh, consts[mat, C_D1], consts[mat, C_D2],
+                                                      consts[mat, C_GAMMA])  # fmt: skip
+        wall_friction = consts[mat, C_SKIN] * tan_phi * wall
         zp = presink_m[w]
         fresh = 1.0 - (zp / z) ** (1.0 + n_i) if z > zp else 0.0
-        f_long = W * (hn_ - rn * fresh * bow / BOW_M)
+        f_long = W * (hn_ - rn * fresh * bow / BOW_M) - wall_friction * bow / BOW_M
         # step 4: lateral shear with its own modulus, mean mobilisation over the patch, plus the side-wall
         # bulldozing of the submerged face, mobilised by the whole sideways displacement
         f_max = coh * A + W * tan_phi
-        q = abs(jy) / Ky
         mob = 1.0 - (1.0 - math.exp(-q)) / q if q > 1e-6 else 0.5 * q
         f_lat = mob * f_max * (1.0 if jy >= 0 else -1.0)
         f_t = math.sqrt(W * W * hn_ * hn_ + f_lat * f_lat)
         if f_t > f_max:  # longitudinal and lateral shear share the strength
             f_lat *= f_max / f_t
-        wall = side_wall_n(z, r, coh, consts[mat, C_D1], consts[mat, C_D2], consts[mat, C_GAMMA])
-        f_lat += (1.0 - math.exp(-q)) * wall * (1.0 if jy >= 0 else -1.0)
+        f_lat += wall * (1.0 if jy >= 0 else -1.0)
         # step 5: damping of the shear springs (LuGre sigma_1), zero at steady state
         sigma1 = BRISTLE_DAMPING_RATIO * 2.0 * math.sqrt(f_max / (2.0 * k0) * mass_share_kg)
         f_long += sigma1 * (jx - jx0) / dt_s
         f_lat += sigma1 * (k0 / Ky) * (jy - jy0) / dt_s
-        f_cap = f_max + wall + W * rn
+        f_cap = f_max + wall + wall_friction + W * rn
         f_t = math.sqrt(f_long * f_long + f_lat * f_lat)
         if f_t > f_cap:
             f_long, f_lat = f_long * f_cap / f_t, f_lat * f_cap / f_t

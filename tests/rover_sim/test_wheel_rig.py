@@ -159,14 +159,18 @@ def test_lateral_slip_deepens_the_sinkage_and_pushes_back():
     assert z0 == pytest.approx(law.lookup(0, 22.0, 0.0)[0], rel=0.02)
 
 
-@pytest.mark.parametrize("wheel", [K10_MINI_GROUSER, K10_MINI_SMOOTH], ids=["grouser", "smooth"])
-def test_drawbar_pull_non_decreasing_in_slip_at_0_deg(wheel):
-    """The law's steady drawbar pull (the table the rig reads at 0 deg) over slip -1 .. 0.9 at the CMU loads."""
-    law = WheelSoilLaw(n_wheels=1, materials=(CMU_SAND,), wheel=wheel)
-    slips = np.linspace(-1.0, 0.9, 77)
-    for load in (18.0, 22.0, 26.0):
-        dp = np.array([law.lookup(0, load, s)[1] - law.lookup(0, load, s)[2] for s in slips])
-        assert np.all(np.diff(dp) >= -1e-9), (load, dp)
+@pytest.mark.parametrize("name", ["grouser", "smooth"])
+def test_drawbar_pull_non_decreasing_in_slip_at_0_deg(name):
+    """The law's steady drawbar pull at 0 deg (the table the rig reads) over the acceptance's sweep, slip -1 .. 0.9,
+    at the wheel's mean 0 deg load in the data: it never falls by more than the bar's tolerance between steps."""
+    from rover_sim.bench.wheel import SWEEP_SLIPS, largest_drop
+
+    zero = [t for t in read_tests() if t.wheel == name and t.slip_angle_deg == 0.0]
+    law = WheelSoilLaw(n_wheels=1, materials=(CMU_SAND,), wheel=zero[0].geometry)
+    load = float(np.mean([t.load_n for t in zero]))
+    curve = [(s, law.lookup(0, load, s)[1] - law.lookup(0, load, s)[2]) for s in SWEEP_SLIPS]
+    assert largest_drop(curve) <= acceptance.WHEEL.monotone_tolerance, curve
+    assert curve[-1][1] > curve[0][1] + 1.5  # from a dragged wheel's resistance to a driven wheel's pull
 
 
 # ------------------------------------------------------------------ bench wheel: input and output
