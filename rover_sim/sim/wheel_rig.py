@@ -51,8 +51,9 @@ from terrains import Material, Terrain
 
 GRAVITY_EARTH_M_S2 = 9.81  # a laboratory soil bin
 CELL_M = 0.005  # the bin's heightfield cells: a tenth of the CMU wheel's width
-BIN_HALF_X_M, BIN_HALF_Y_M = 0.45, 0.30
-START_X_M = -0.33
+BIN_HALF_Y_M = 0.30
+BIN_BEHIND_M, BIN_AHEAD_M = 0.15, 0.30  # soil bin behind the start and beyond the end of the travel (ruts, berms,
+# the depth of an earlier rut read ahead of the wheel: none of them may reach the bin's end)
 SETTLE_S = 0.5  # the wheel is lowered onto the soil and rests this long before the carriage moves
 RAMP_S = 0.2  # carriage speed and wheel rate ramp up over this time
 SETTLE_M = 0.15  # carriage travel before the window (more than a contact length: ruts, bow and sinkage settle)
@@ -106,7 +107,7 @@ def slip_ratio(travel_m: float, rim_travel_m: float) -> float:
 
 
 def _rig_xml(wheel: WheelParams, hanger_mass_kg: float, beta_rad: float, timestep_s: float, gravity: float,
-             nrow: int, ncol: int) -> str:  # fmt: skip
+             nrow: int, ncol: int, half_x_m: float) -> str:  # fmt: skip
     r = wheel.radius_m
     i_spin = 0.5 * WHEEL_MASS_KG * r * r
     z0 = r + 0.002  # released 2 mm above the surface
@@ -115,11 +116,11 @@ def _rig_xml(wheel: WheelParams, hanger_mass_kg: float, beta_rad: float, timeste
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{timestep_s}" integrator="implicitfast" gravity="0 0 {-gravity}"/>
   <asset>
-    <hfield name="terrain" nrow="{nrow}" ncol="{ncol}" size="{BIN_HALF_X_M} {BIN_HALF_Y_M} {ELEVATION_RANGE_M} 0.1"/>
+    <hfield name="terrain" nrow="{nrow}" ncol="{ncol}" size="{half_x_m} {BIN_HALF_Y_M} {ELEVATION_RANGE_M} 0.1"/>
   </asset>
   <worldbody>
     <geom name="terrain" type="hfield" hfield="terrain" pos="0 0 {BASE_Z_M}" contype="0" conaffinity="0"/>
-    <body name="carriage" pos="{START_X_M} 0 {z0}">
+    <body name="carriage" pos="{BIN_BEHIND_M - half_x_m} 0 {z0}">
       <joint name="carriage_x" type="slide" axis="1 0 0"/>
       <inertial pos="0 0 0" mass="5" diaginertia="0.1 0.1 0.1"/>
       <body name="hanger" euler="0 0 {-beta_rad}">
@@ -157,18 +158,20 @@ class WheelRig:
                  timestep_s: float = 0.005, deformable: bool = True) -> None:  # fmt: skip
         self.wheel, self.soil, self.gravity_m_s2 = wheel, soil, gravity_m_s2
         self.timestep_s, self.deformable = timestep_s, deformable
-        ncol = int(round(2 * BIN_HALF_X_M / CELL_M)) + 1
+
+    def _build(self, run: RigRun, travel_m: float) -> None:
+        """A fresh bin long enough for ``travel_m`` of carriage travel, the rig, the law and the deformable soil."""
+        ncol = int(math.ceil((BIN_BEHIND_M + travel_m + BIN_AHEAD_M) / CELL_M)) + 1
         nrow = int(round(2 * BIN_HALF_Y_M / CELL_M)) + 1
         self.terrain = Terrain.from_heights(np.zeros((nrow, ncol)), CELL_M, Material.SAND)
-
-    def _build(self, run: RigRun) -> None:
+        half_x = self.terrain.half_x_m
         mass = run.load_n / self.gravity_m_s2
         hanger = mass - WHEEL_MASS_KG
         if hanger <= 0.0:
             raise ValueError(f"load {run.load_n} N is below the rig's wheel weight ({WHEEL_MASS_KG} kg)")
         nrow, ncol = self.terrain.heights_m.shape
         xml = _rig_xml(self.wheel, hanger, math.radians(run.slip_angle_deg), self.timestep_s, self.gravity_m_s2,
-                       nrow, ncol)  # fmt: skip
+                       nrow, ncol, half_x)  # fmt: skip
         spec = mujoco.MjSpec.from_string(xml)
         data = (self.terrain.heights_m - BASE_Z_M) / ELEVATION_RANGE_M
         spec.hfield("terrain").userdata = data.astype(np.float32).ravel().tolist()
@@ -216,7 +219,7 @@ class WheelRig:
             run_in: bool = True) -> RigResult:  # fmt: skip
         """Drive the wheel at ``run`` in a fresh bin; the means over ``window_m`` after ``settle_m`` of travel.
         ``run_in=False`` starts the shear states from rest instead (see the module docstring)."""
-        self._build(run)
+        self._build(run, settle_m + window_m)
         m, d, dt = self.model, self.data, self.timestep_s
         r = self.wheel.radius_m
         v = abs(run.travel_speed_m_s)
