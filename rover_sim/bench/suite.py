@@ -22,6 +22,7 @@ from rover_sim.bench import gate, write_json
 from rover_sim.bench.environment import environment
 from rover_sim.bench.seeded import METRICS, Case, SeedRuns, cell, run_seeded
 from rover_sim.bench.seeds import Seeds
+from rover_sim.errors import ConfigError
 from rover_sim.io.junit import Case as JunitCase
 from rover_sim.resources import suite_baseline_path
 from rover_sim.runtime import acceptance
@@ -64,8 +65,15 @@ class StackResult:
         return all(self.scenario_passed(r)[0] for r in self.runs)
 
 
-def scenario_names(fast: bool) -> list[str]:
-    return [n for n in catalogue() if (not fast or load_scenario(n).fast) and load_scenario(n).sol is None]
+def scenario_names(fast: bool, only: tuple[str, ...] = ()) -> list[str]:
+    """The suite's scenarios (sol-scale drives are `bench traverse`'s): the fast ones with ``fast``; ``only``: just
+    these (each must be a catalogue scenario, else a ConfigError naming it)."""
+    names = [n for n in catalogue() if (not fast or load_scenario(n).fast) and load_scenario(n).sol is None]
+    unknown = [n for n in only if n not in names]
+    if unknown:
+        raise ConfigError("--scenario", unknown[0], f"not a suite scenario{' of --fast' if fast else ''}; choose from "
+                          f"{', '.join(names)}")  # fmt: skip
+    return [n for n in names if n in only] if only else names
 
 
 def default_baseline(baseline_path: Path | None) -> Path:
@@ -282,15 +290,17 @@ def bench_suite(
     scheduler: str | None = None,
     out_root: Path = Path("runs/bench_suite"),
     png_path: Path | None = None,
+    only: tuple[str, ...] = (),
 ) -> SuiteResult:
     """See the module doc. ``plugins``: stack label -> ``--set`` overrides swapping the parts in (closed loop).
     ``replay``: label -> VO import path, run on the built-in stack's identical inputs (open loop, paired; reported
     and gated, not in the exit status). With ``fast`` or a ``baseline_path`` every stack is gated against the
     baseline (the committed one holds the built-in stack's figures: another VO must then be no worse than MER's);
     ``update_baseline`` writes the baseline from this run (the last stack's with your own ``baseline_path``) plus a
-    perturbed run of the same stack (the spread the minimum detectable change is computed from)."""
+    perturbed run of the same stack (the spread the minimum detectable change is computed from). ``only``: run just
+    these scenarios."""
     profiles = profiles or ((BASELINE_PROFILE,) if fast else PROFILES)
-    names = scenario_names(fast)
+    names = scenario_names(fast, only)
     store = default_baseline(baseline_path)
     kw = {"perturb": perturb, "workers": workers, "scheduler": scheduler}
     baseline = None

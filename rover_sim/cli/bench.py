@@ -343,6 +343,9 @@ def bench_suite_cmd(
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
     png: Annotated[Path | None, typer.Option("--png", help="With a plugin: the scorecard's box plots.")] = None,
+    scenario: Annotated[
+        list[str] | None, typer.Option("--scenario", help="Only this scenario (repeatable) [default: all].")
+    ] = None,
     junit: JunitOpt = None,
     profile: Annotated[
         list[str] | None,
@@ -392,7 +395,7 @@ def bench_suite_cmd(
                              plugins=plugins, replay={v: v for v in replay_vo or []} or None,
                              baseline_path=baseline, update_baseline=update_baseline,
                              perturb=parse_perturb(perturb), workers=workers, scheduler=scheduler,
-                             png_path=png)  # fmt: skip
+                             png_path=png, only=tuple(scenario or ()))  # fmt: skip
         cases = junit_cases(result.stacks)
         stop = interrupt_of(result.stacks)
         if stop is not None:

@@ -76,3 +76,11 @@ def test_scenarios_prints_each_first_sentence_whole():
         assert description.startswith(text), name
         assert text == description or re.search(r"[.!?]$", text), f"{name}: cut mid-sentence: {text!r}"
     assert rows["flat_benign"].endswith("(Ali et al. 2005; REFERENCE section 3.1).")  # not cut at "et al."
+
+
+def test_bench_suite_unknown_scenario_is_bad_input_before_any_run(tmp_path):
+    r = CliRunner().invoke(app, ["bench", "suite", "--scenario", "wopmay", "--scenario", "nosuch", "--seeds", "1",
+                                 "--json", str(tmp_path / "s.json")])  # fmt: skip
+    assert r.exit_code == ExitStatus.BAD_INPUT, r.output
+    assert "--scenario" in r.output and "nosuch" in r.output and "wopmay" in r.output
+    assert not (tmp_path / "s.json").exists()
