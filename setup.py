@@ -16,7 +16,7 @@ DATA_FOLDERS = {  # source folder -> files shipped from it and from every folder
 
 packages = find_packages(include=["rover_sim", "rover_sim.*", "nav", "nav.*", "terrains", "terrains.*"])
 package_dir: dict[str, str] = {}
-package_data = {"rover_sim": ["py.typed"]}
+package_data = {"rover_sim": ["py.typed"], "nav": ["py.typed"]}
 for folder, globs in DATA_FOLDERS.items():
     root = f"rover_sim._data.{folder}"
     below = [f"{root}.{sub}" for sub in find_namespace_packages(where=folder, exclude=["*__pycache__*"])]

@@ -364,7 +364,10 @@ class RoverEnv(EnvWorld, gymnasium.Env):
     def _primitive(self, action):
         from rover_sim.sim.drive import Arc, Straight, TurnInPlace
 
-        a = np.clip(np.nan_to_num(np.asarray(action, dtype=np.float64).reshape(3)), -1.0, 1.0)
+        raw = np.asarray(action, dtype=np.float64)
+        if raw.size != 3 or not np.all(np.isfinite(raw)):
+            raise ValueError(f"action must be 3 finite numbers (mode, curvature, amount) in [-1, 1], got {action!r}")
+        a = np.clip(raw.reshape(3), -1.0, 1.0)
         mode, curvature, amount = (float(v) for v in a)
         if mode < 0:
             return TurnInPlace(amount * self.max_turn_rad)

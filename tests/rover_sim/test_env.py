@@ -211,3 +211,14 @@ def test_flight_images_are_the_missions_rectified_pairs():
         ideal.close()
         if world is not None:
             world.close()
+
+
+@pytest.mark.parametrize("bad", [[np.nan, 0.0, 0.5], [1.0, np.inf, 0.5], [1.0, 0.0]])
+def test_a_nan_inf_or_misshaped_action_is_an_error_not_a_drive(bad):
+    env = RoverEnv(**SMALL)
+    try:
+        env.reset(seed=0)
+        with pytest.raises(ValueError, match="3 finite numbers"):
+            env.step(np.asarray(bad))
+    finally:
+        env.close()
