@@ -1,6 +1,6 @@
 """Image formation of a MER-like CCD camera: exposure control, photons, noise, 12-bit ADC, 12->8-bit companding.
 
-Stage order (issue #16 item 2; the renderer calls :meth:`ImageFormation.form` once per image, after the lens):
+Stage order (the renderer calls :meth:`ImageFormation.form` once per image, after the lens):
 
 1. **Radiance.** The renderer's float luminance ``Y`` (0-255 scale) is taken as scene radiance times a nominal
    exposure: ``r = Y / 255``.

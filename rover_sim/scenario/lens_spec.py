@@ -1,4 +1,4 @@
-"""``[sensors.lens]``: lens models, camera mounting, calibration and mast-encoder errors (issue #16).
+"""``[sensors.lens]``: lens models, camera mounting, calibration and mast-encoder errors.
 
 ``profile = "ideal"``: every camera is the MJCF pinhole, images arrive rectified, the onboard rig is exact, the mast
 points where commanded (today's behaviour, byte for byte). ``profile = "flight"``: the cameras form raw, distorted

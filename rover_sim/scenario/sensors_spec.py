@@ -1,4 +1,4 @@
-"""``[sensors]``: how far the simulated sensors are from ideal (issue #16).
+"""``[sensors]``: how far the simulated sensors are from ideal.
 
 ``profile = "flight"`` gives every error term the size flight hardware had (README: Error budget);
 ``profile = "ideal"`` zeroes them (perfect calibration, no lens distortion, exact odometry geometry). Every term

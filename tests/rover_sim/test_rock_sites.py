@@ -257,7 +257,7 @@ def test_bench_rocks_meets_the_acceptance(tmp_path) -> None:
 
 @pytest.mark.slow
 def test_bench_rocks_meets_the_issue_bar_on_the_flight_profile() -> None:
-    """Issue #16: with half the rocks irregular, on the flight profile, recall and precision >= 0.85 and median
+    """With half the rocks irregular, on the flight profile, recall and precision >= 0.85 and median
     model RMS <= 4 cm for each rock class (rocks > 20 cm within 30 m), and the chain beats VO alone."""
     from rover_sim.bench.rocks import bench_rocks
 
