@@ -112,7 +112,7 @@ class SurveyConfig:
     # flight profile: the panoramas' own epipolar check, with the relative focal length (see the module docstring).
     # A 0.07 % relative focal error (1 sigma of the flight calibration) is 0.7 px of disparity at the edges of a
     # 2048 px frame, 3 % of range at 20 m: seed 3's draw (0.11 %) tripled the ground's height spread at every range
-    # and gave the survey 394 phantom rocks; its rows alone fit +0.113 % there (README, rock survey)
+    # and gave the survey 394 phantom rocks; its rows alone fit +0.113 % there (docs/navigation/index.md)
     focal_check: bool = True
     stereo: PanoramaStereoParams = PanoramaStereoParams()
     rocks: RockParams = RockParams()

@@ -26,7 +26,7 @@ Stage order (the renderer calls :meth:`ImageFormation.form` once per image, afte
    about uniform in 8-bit units: a "square-rooter" encodes read and shot noise equally, J. Janesick, CCD-world
    list, 1998).
 
-Defaults of the ``flight`` profile and where they come from (approximate where marked; the README error budget
+Defaults of the ``flight`` profile and where they come from (approximate where marked; docs/physics/error-budget.md
 quotes this table). The Maki et al. (2003) detector figures (full well, read noise) are quoted from memory of the
 paper's camera table and were not re-checked against the text in this change: verify before quoting them as
 published values.

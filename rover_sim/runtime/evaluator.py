@@ -80,7 +80,7 @@ class VoStepRecord:
 
 @dataclass
 class Metrics:
-    """metrics.json (keys of the issue first, then extras)."""
+    """metrics.json (the core keys first, then extras)."""
 
     scenario: str
     seed: int

@@ -92,12 +92,12 @@ class PhysicsSpec(Spec):
         ge=0.0005,
         le=0.01,
         description="Physics step, s. 0.005 is the step the soil law was calibrated at (every catalogue scenario); a "
-        "coarser step trades slip accuracy for speed (README: Speed of long drives).",
+        "coarser step trades slip accuracy for speed (docs/physics/streamed-terrain.md).",
     )
     soil_model: Literal["bekker", "wong_reece"] = Field(
         "wong_reece",
         description="Wheel-soil law: 'wong_reece' (default: stress distribution, two-scale shear, the wheels' own "
-        "cylinder contact) or the earlier 'bekker' patch law (README: The wheel-soil law).",
+        "cylinder contact) or the earlier 'bekker' patch law (docs/physics/index.md).",
     )
     deformable: bool = Field(
         False, description="Ruts, berms and multipass in the heightfield (opt-in); needs 'wong_reece'."

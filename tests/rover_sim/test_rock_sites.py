@@ -146,7 +146,7 @@ def small_site_scenario():
             "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 35.0},
             "nav": {"vo": False},
             "sensors": {"profile": "ideal"},  # the survey renders its own pinhole panoramas
-            "appearance": {"regolith": "classic"},  # the survey was built and measured on this soil (README)
+            "appearance": {"regolith": "classic"},  # the survey was built and measured on this soil
             "commands": [{"type": "turn", "angle_deg": 0.0}],
         }
     )
