@@ -182,20 +182,22 @@ def baseline_table(data: dict) -> list[str]:
     out = [
         f"`benchmarks/suite_baseline.json` ({data.get('format', '?')}): the baseline `rover-sim bench suite --fast` "
         f"gates against. {len(seeds)} seeds ({seeds[0]}–{seeds[-1]}, gate set), {data.get('profile', '?')} sensor "
-        f"profile, each scenario's own terrain cell size (see the [catalogue](../scenarios.md)). The perturbed "
-        f"run adds a seeded perturbation of {pert.get('size', '?')} m and rad (seed {pert.get('seed', '?')}) to each "
-        f"run's settled initial state: the spread another CPU or build would cause. Machine: {machine(data)}.",
+        f"profile, each scenario's own terrain cell size (column `cell`; see the [catalogue](../scenarios.md)). The "
+        f"perturbed run adds a seeded perturbation of {pert.get('size', '?')} m and rad (seed {pert.get('seed', '?')}) "
+        f"to each run's settled initial state: the spread another CPU or build would cause. Machine: {machine(data)}.",
         "",
         "Each cell: median [min, max] over the seeds.",
         "",
-        "| scenario | run | " + " | ".join(f"`{f}`" for f in figures) + " |",
-        "|---|---|" + "---:|" * len(figures),
+        "| scenario | cell (m) | run | " + " | ".join(f"`{f}`" for f in figures) + " |",
+        "|---|---:|---|" + "---:|" * len(figures),
     ]
     for name, sc in data["scenarios"].items():
+        toml = ROOT / "scenarios" / f"{name}.toml"
+        cell = tomllib.loads(toml.read_text()).get("terrain", {}).get("cell_size_m", "-") if toml.exists() else "-"
         for run in ("per_seed", "perturbed"):
             block = sc.get(run) or {}
             cells = " | ".join(_stats(list((block.get(f) or {}).values())) for f in figures)
-            out.append(f"| {name} | {'recorded' if run == 'per_seed' else 'perturbed'} | {cells} |")
+            out.append(f"| {name} | {cell} | {'recorded' if run == 'per_seed' else 'perturbed'} | {cells} |")
     return out + [""]
 
 
