@@ -3,9 +3,10 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.docs-installed
 export MUJOCO_GL ?= egl
 
-.PHONY: demo test test-all bench lint clean setup
+.PHONY: demo test test-all bench lint docs clean setup
 
 setup: $(STAMP)
 
@@ -27,6 +28,15 @@ test-all: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/rover-sim bench slip --json runs/bench/slip.json
+
+# the documentation site: generated pages (scenario catalogue, CLI, benchmark tables) then a strict build
+$(DOCS_STAMP): $(STAMP)
+	$(BIN)/python -m pip install -q -c constraints.txt -e '.[docs]'
+	@touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(BIN)/python scripts/gen_docs.py
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict -d runs/site
 
 lint: $(STAMP)
 	$(BIN)/ruff check rover_sim nav terrains tests

@@ -41,7 +41,7 @@ HUBER_PX = 0.15  # Huber threshold of the row residuals (about the corner matche
 MAX_ROTATION_RAD = 0.01  # a fitted correction beyond 0.57 deg is a mismatch, not a calibration error: refused
 MAX_SCALE = 0.01  # ... and so is a relative focal length off by more than 1 %
 # Row offsets the fit cannot tell from a rotation: the bilinear resampling's sub-pixel phase moves rectified rows by
-# -0.04 to +0.07 px with an exact calibration (README, rectified row disparity). A pair whose calibration error
+# -0.04 to +0.07 px with an exact calibration (docs/physics/error-budget.md). A pair whose calibration error
 # (1 sigma, ``EpipolarCheck.prior_sigma_rad``) moves its rows by less than this is not checked: there the fit would
 # mostly turn that offset into a rotation (256^2 hazcams: 68 px focal length, 0.35 mrad -> 0.024 px; fitted
 # "pitches" of 1.3-1.7 mrad, four sigma of the calibration, on autonav field 1)

@@ -68,7 +68,7 @@ class VisualOdometer(Protocol):
 
     Optional keyword ``feature_mask``: if ``step`` declares a ``feature_mask`` parameter (or ``**kwargs``), the
     simulator passes a bool (H, W) image, False where no feature should be picked: in and near the rover's own
-    predicted shadow and on the rover's hardware (:mod:`nav.vo.shadow`; issue #17). A ``step`` without it is
+    predicted shadow and on the rover's hardware (:mod:`nav.vo.shadow`). A ``step`` without it is
     called exactly as above and never sees the mask.
 
     The camera model may change between two pairs (texture-seeking mast pointing): ``rig`` is always the current

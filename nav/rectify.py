@@ -15,7 +15,7 @@ rover navigation software for planetary exploration"). Here: from the calibrated
 * remap tables (like ``cv2.initUndistortRectifyMap``, but through our models): for each rectified pixel, its ray
   in the rectified frame, rotated into the raw camera, projected by the calibrated model.
 
-Row error budget of a rectified pair (issue #16 bar: <= 0.3 px on matched features; 256^2 navcam, flight
+Row error budget of a rectified pair (the bar: <= 0.3 px on matched features; 256^2 navcam, flight
 profile): the calibration's stereo relative rotation dominates (0.02 deg per axis = 0.11 px of row shift, 1 sigma);
 the bilinear resampling (the simulator's render -> raw remap, then this raw -> rectified one) adds a row offset
 of -0.04 to +0.07 px that depends on the maps' sub-pixel phases (exact calibrations of 6 true pairs; bicubic

@@ -285,7 +285,7 @@ class RoverEnv(EnvWorld, gymnasium.Env):
         self._mast = np.array([math.radians(sc.nav.mast_pan_deg), math.radians(sc.nav.mast_tilt_deg)])
         self._point_mast(sc)
         sim.step_for(1.0)
-        odo = sc.sensors.odometry  # [sensors.odometry] (issue #16): none in the ideal profile
+        odo = sc.sensors.odometry  # [sensors.odometry]: none in the ideal profile
         if hasattr(sim.law, "sinkage_rolling_radius"):
             sim.law.sinkage_rolling_radius = odo.sinkage_rolling_radius
         errors = OdometryErrors.draw(sensor_seed, **odo.drawn_sizes())

@@ -3,7 +3,7 @@
 The classic sand texture (:mod:`terrains.appearance`) is FFT-filtered noise over the whole site: it cannot be
 computed one tile at a time. This one can: every term is a function of the world position ``(x, y)`` and the seed
 only (hashed integer lattices, no global state), so adjacent tiles join seamlessly and equal the whole-site texture
-(:func:`albedo_tile`; issue #16 item 4, and the streamed terrain of issue #18).
+(:func:`albedo_tile`, used by the streamed terrain and the moving sun).
 
 Scales (the soil of the MER landing sites: fine dust and sand, a lag of granules and pebbles, scattered clasts;
 Golombek et al. 2006, "Geology of the Gusev cratered plains from the Spirit rover traverse", JGR 111 E02S07;

@@ -1,4 +1,4 @@
-"""Irregular rocks: shapes outside the four analytic models the rock modeller fits (issue #16 item 8).
+"""Irregular rocks: shapes outside the four analytic models the rock modeller fits.
 
 The generator's analytic rocks (hemispheroid, semi-ellipsoid, cone, tetrahedron) are exactly the models of
 Li et al.'s rock modeller (``nav.rocks``), so model accuracy measured on them is in-class only. Real rocks are not:

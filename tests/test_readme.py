@@ -39,6 +39,14 @@ def run_as_script(code: str, directory: Path, timeout_s: float = 900) -> subproc
     )
 
 
+RUN_BY_A_TEST = ("## Library guide", "## Gymnasium environment")
+
+
+def test_every_python_snippet_is_run_by_a_test():
+    """Each ``python`` block of the README is the one after a heading that a test below runs as a script."""
+    assert sorted(python_blocks()) == sorted(block_after(h) for h in RUN_BY_A_TEST)
+
+
 def test_snippets_that_start_processes_have_a_main_guard():
     """``spawn`` workers import the script again: without the guard each worker runs the whole script again."""
     for code in python_blocks():

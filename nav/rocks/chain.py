@@ -53,7 +53,7 @@ class ChainParams:
     # robust tie points (Baarda-style data snooping): a matched pair whose residual, normalised by its covariance
     # and by the robust scale of the pair's residuals, exceeds this chi-square (3 dof, 99 %) is not a tie point
     # off by default: on the tuning survey (rock_localization --seed 1, half the rocks irregular) it dropped mostly
-    # wrong matches but left the adjusted sites no better (README, bench rocks)
+    # wrong matches but left the adjusted sites no better (docs/navigation/index.md, rock localisation)
     tie_gate_chi2: float = 0.0  # e.g. 11.34 (chi-square, 3 dof, 99 %); 0 disables the gate
     min_tie_points: int = 4  # a rock edge needs this many tie points left after the gate
     # a heading error common to all tie points of one site's panorama (correlated, so not averaged down by the

@@ -129,7 +129,7 @@ class SanityConstraints:
     the site frame when the previous attitude is given, else in the previous rover frame) and its
     roll/pitch/yaw change. ``None`` disables a limit. A violation counts as a failure to converge.
 
-    On by default with flight-like limits (issue #17). The paper gives the kinds of limit, not the values; these
+    On by default with flight-like limits. The paper gives the kinds of limit, not the values; these
     follow from its numbers: a VO step is at most 75 cm (60 % overlap) and slip reached 125 % (Spirit, Sol 206),
     so a true translation update stays under ~1 m; the IMU kept attitude well ("VO was used mostly to update
     position"), so roll/pitch updates beyond a few degrees are VO errors, and yaw (gyro drift plus skid-steer

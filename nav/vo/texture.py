@@ -1,4 +1,4 @@
-"""Trackable texture and view overlap, for texture-seeking mast pointing before a VO step (issue #17, item 2).
+"""Trackable texture and view overlap, for texture-seeking mast pointing before a VO step.
 
 MER's drivers pointed the navcams at textured ground (rocks, outcrop edges, the rover's own tracks) for VO. The
 onboard side does it here from its own data: :func:`trackable_points` counts the features VO could use in a pair

@@ -25,7 +25,7 @@ from rover_sim.world.clock import AUTONAV_CYCLE_S, IMAGE_PAIR_ACQUIRE_S
 
 # A sol's drive logs every cycle's hazcam pair but the cycle's detail (depth image, stereo points, goodness map,
 # arc votes: ~100 kB of the ~125 kB a cycle) only every SOL_DETAIL_EVERY-th cycle and on boxed-in cycles, so a
-# kilometre with a thousand-odd cycles stays under 150 MB (issue #18); the viewer shows the latest detail logged.
+# kilometre with a thousand-odd cycles stays under 150 MB; the viewer shows the latest detail logged.
 SOL_DETAIL_EVERY = 4
 
 if TYPE_CHECKING:

@@ -87,7 +87,7 @@ VO_FAILED_STEP_SIGMA_FRAC = 0.1  # a step VO did not correct is the wheel odomet
 # the same way, so they add up with the distance, not with its square root. 1 % is MER VO's accuracy figure
 # (REFERENCE section 3.4: MSSTB under 1 %), not fitted here. Without it the summed step covariances were 20-40 times
 # too small in sigma: 1-2 mm against 3-7 cm errors on the survey's 13-16 m legs (chi-square 350-3400, 3 dof;
-# README, rock survey, session 13)
+# docs/navigation/rock-localization.md)
 VO_SYSTEMATIC_SIGMA_FRAC = 0.01
 
 
@@ -112,7 +112,7 @@ class SurveyConfig:
     # flight profile: the panoramas' own epipolar check, with the relative focal length (see the module docstring).
     # A 0.07 % relative focal error (1 sigma of the flight calibration) is 0.7 px of disparity at the edges of a
     # 2048 px frame, 3 % of range at 20 m: seed 3's draw (0.11 %) tripled the ground's height spread at every range
-    # and gave the survey 394 phantom rocks; its rows alone fit +0.113 % there (README, rock survey)
+    # and gave the survey 394 phantom rocks; its rows alone fit +0.113 % there (docs/navigation/index.md)
     focal_check: bool = True
     stereo: PanoramaStereoParams = PanoramaStereoParams()
     rocks: RockParams = RockParams()

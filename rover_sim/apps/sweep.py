@@ -38,7 +38,7 @@ from rover_sim.apps.sweep_jobs import GridAxis, Job, JobResult, SweepResult
 from rover_sim.apps.sweep_plots import plot_sweep
 from rover_sim.errors import ConfigError, DaskUnavailable, SchedulerUnreachable
 
-#: metrics.json keys copied into results.csv (the issue's metric set), in column order
+#: metrics.json keys copied into results.csv (the core metric set), in column order
 METRIC_COLUMNS = (
     "scenario",
     "seed",

@@ -1,4 +1,4 @@
-"""`rover-sim bench autonav`: GESTALT autonomous navigation over seeded rock fields (issue acceptance).
+"""`rover-sim bench autonav`: GESTALT autonomous navigation over seeded rock fields and their acceptance bars.
 
 20 seeded fields, rocks up to 60 cm at 10 % cover (Golombek-Rapp k = 0.10), goal 20 m away. Counts runs whose
 final true position is within 1 m of the goal, runs with any ground-truth contact of the body (or of any part

@@ -1,4 +1,4 @@
-"""`rover-sim bench slip`: the mobility benchmark of the default Wong–Reece law (issue #13).
+"""`rover-sim bench slip`: the mobility benchmark of the default Wong–Reece law.
 
 ``bench slip --soil-model bekker`` (rover_sim/bench/slip.py) measures the earlier Bekker patch law; this module
 runs every rover with ``soil_model="wong_reece"``. All on uniform slopes at the scenarios' 0.04 m
@@ -131,7 +131,7 @@ def physics_speed(sim_s: float = 20.0, seed: int = 0, round_s: float = 1.0) -> d
     each wheel sphere against the heightfield itself (a reference: what "bare MuJoCo" of a rover on a
     heightfield costs).
 
-    "On one core" (issue #13): each mode's time is the CPU time of this thread (``time.thread_time``), so other
+    "On one core": each mode's time is the CPU time of this thread (``time.thread_time``), so other
     jobs on a shared machine do not count as our cost; the modes run interleaved, ``round_s`` of simulated time
     each in turn, so they see the same machine load, cache state and clock speed. Keys: ``law``, ``deform``,
     ``bare`` (CPU-time factors, the ones judged) and ``<mode>_wall`` (wall-clock factors of the same steps)."""

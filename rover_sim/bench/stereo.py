@@ -209,7 +209,7 @@ def bench_stereo(
 ) -> dict:
     """MER SAD vs StereoBM on the profile's pairs at each resolution (256 px first: the headline keys), then each
     plugin matcher (``plugins``) on the 256 px pairs. The flight profile (default) also runs the ideal pairs, kept
-    under ``"ideal"`` beside it (issue #16: every table says its profile, ideal rows kept)."""
+    under ``"ideal"`` beside it (every table says its profile, ideal rows kept)."""
     if not resolutions_px or resolutions_px[0] != 256:
         raise ValueError(f"bench stereo resolutions {resolutions_px}: the first must be 256 (the headline)")
     agg, all_rows, pairs_256 = _bench_profile(profile, resolutions_px, repeats)

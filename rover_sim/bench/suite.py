@@ -340,7 +340,7 @@ def report(stacks: list[StackResult], seeds: Seeds, png_path: Path | None) -> No
 
 def suite_json(stacks: list[StackResult], seeds: Seeds, perturb: tuple[float, int] | None,
                baseline: gate.Baseline | None, store: Path) -> dict:  # fmt: skip
-    """The issue's JSON: the built-in stack under ``profiles``, the others under ``plugins`` (closed loop) and
+    """The JSON: the built-in stack under ``profiles``, the others under ``plugins`` (closed loop) and
     ``replayed`` (open loop on the built-in stack's inputs), the scorecard; ``passed`` from the closed-loop stacks."""
     return {
         "seeds": list(seeds.values),

@@ -1,4 +1,4 @@
-"""`rover-sim bench traverse`: sol-scale and kilometre drives on streamed terrain (issue #18 acceptance).
+"""`rover-sim bench traverse`: sol-scale and kilometre drives on streamed terrain, with their bars.
 
 Cases: the two sol scenarios of the catalogue (``spirit_plains_sol``, ``opportunity_record_sol``) and the
 benchmark-only 1 km traverse (``benchmarks/traverse_1km.toml``). Each case runs in a fresh ``spawn`` process, so

@@ -164,7 +164,7 @@ def bench_traverse_cmd(
     set_: Annotated[list[str] | None, typer.Option("--set", help="Override a field of every case.")] = None,
     junit: JunitOpt = None,
 ) -> None:
-    """Sol-scale and 1 km drives on streamed terrain (issue #18): distance, wall time, real-time factor, peak and
+    """Sol-scale and 1 km drives on streamed terrain: distance, wall time, real-time factor, peak and
     100 m RSS, recording size, DR/VO errors, goal distance; each case in a fresh process."""
     preflight("bench traverse", junit, files={"--json": json}, dirs={"--out": out})
     with guarded(junit, "bench traverse"):

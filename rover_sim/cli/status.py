@@ -1,4 +1,4 @@
-"""Exit statuses of ``rover-sim run`` and every ``rover-sim bench`` command, in one place (README, Commands).
+"""Exit statuses of ``rover-sim run`` and every ``rover-sim bench`` command, in one place (docs/cli.md).
 
 | status | meaning |
 |---:|---|

@@ -4,7 +4,7 @@ as one columnar chunk (rerun ``send_columns``) every ``flush_rows`` rows.
 Why: every ``RecordingStream.log`` call that reaches the file on its own becomes a chunk that carries its own Arrow
 schema and row ids, about 1.5 kB whatever it holds. A long traverse logs the rover pose, a handful of scalars and the
 trajectories thousands of times; sent row by row they cost ~0.15 MB per metre of driving in chunk overhead alone
-(issue #18: a 1 km recording must stay under 150 MB). Sent in columns of ``flush_rows`` rows, the same rows cost a
+(a 1 km recording must stay under 150 MB). Sent in columns of ``flush_rows`` rows, the same rows cost a
 few bytes each. The rows and their times are unchanged (same ``entity_row_counts``); only the chunking differs,
 and it no longer depends on wall-clock timing (rerun's own micro-batcher flushes every 200 ms of wall time).
 

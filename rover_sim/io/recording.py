@@ -29,7 +29,7 @@ The entity tree mirrors the frame tree (rerun ``nuscenes`` example style)::
 Timelines: ``sim_time`` (a duration, seconds) and ``step`` (a sequence). Every timed call sets both; a call
 without ``step`` reuses the last step seen.
 
-Per-call cost is kept small for long traverses (issue #18: the recording grows linearly with distance): static
+Per-call cost is kept small for long traverses (the recording grows linearly with distance): static
 data is sent once; camera intrinsics and extrinsics are re-sent only when they change; a trajectory is decimated to
 ``min_spacing_m`` and split into blocks of at most ``segment_points`` vertices, so each call re-sends only the open
 block (completed blocks stay visible, latest-at semantics), never the whole polyline; the high-rate streams (rover

@@ -1,4 +1,4 @@
-"""The recording's ground in deformable runs: tiles re-logged where the wheels change them (issue #13).
+"""The recording's ground in deformable runs: tiles re-logged where the wheels change them.
 
 A rigid site logs its ground once, static (``world/terrain``, decimated to ``terrain_mesh_step``). With
 ``[physics] deformable = true`` (:mod:`rover_sim.sim.deform`) that one static mesh would hide the ruts, so the

@@ -1,6 +1,6 @@
 """Image formation of a MER-like CCD camera: exposure control, photons, noise, 12-bit ADC, 12->8-bit companding.
 
-Stage order (issue #16 item 2; the renderer calls :meth:`ImageFormation.form` once per image, after the lens):
+Stage order (the renderer calls :meth:`ImageFormation.form` once per image, after the lens):
 
 1. **Radiance.** The renderer's float luminance ``Y`` (0-255 scale) is taken as scene radiance times a nominal
    exposure: ``r = Y / 255``.
@@ -26,7 +26,7 @@ Stage order (issue #16 item 2; the renderer calls :meth:`ImageFormation.form` on
    about uniform in 8-bit units: a "square-rooter" encodes read and shot noise equally, J. Janesick, CCD-world
    list, 1998).
 
-Defaults of the ``flight`` profile and where they come from (approximate where marked; the README error budget
+Defaults of the ``flight`` profile and where they come from (approximate where marked; docs/physics/error-budget.md
 quotes this table). The Maki et al. (2003) detector figures (full well, read noise) are quoted from memory of the
 paper's camera table and were not re-checked against the text in this change: verify before quoting them as
 published values.

@@ -1,4 +1,4 @@
-"""The true lenses: raw, distorted images from the ideal pinhole render (issue #16, ``[sensors.lens]``).
+"""The true lenses: raw, distorted images from the ideal pinhole render (``[sensors.lens]``).
 
 MuJoCo renders pinhole images only. For each camera the true raw model (:mod:`nav.lens`: CAHVOR navcams,
 Kannala-Brandt f-theta hazcams, each turned by its true mounting rotation relative to the MJCF camera) is formed

@@ -150,9 +150,9 @@ class StereoRenderer:
     the same buffer a ``px``-sized renderer would draw into, so the pixels are the same). One context per size cost
     ~100-150 MB each on llvmpipe (shadow map, framebuffer, uploaded meshes and texture): the flight lenses draw each
     pair at its own size, so a drive that first images the rear hazcams while backing up grew by a whole context
-    (issue #18's memory bar); one context also means one upload per streamed window move. Created on first use and
-    reused; close it (or use it as a context manager) to free it. Camera geometry is taken from the physics model,
-    so :meth:`rig` equals :func:`rover_sim.render.cameras.stereo_rig` at the output resolution.
+    (the traverse benchmark's memory bar); one context also means one upload per streamed window move. Created on
+    first use and reused; close it (or use it as a context manager) to free it. Camera geometry is taken from the
+    physics model, so :meth:`rig` equals :func:`rover_sim.render.cameras.stereo_rig` at the output resolution.
     """
 
     def __init__(self, sim: RoverSim, config: RenderConfig | None = None, lens: TrueLens | None = None) -> None:

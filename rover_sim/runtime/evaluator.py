@@ -22,7 +22,7 @@ from nav.trajectory import Pose, Trajectory, relative_errors
 from rover_sim.runtime.pose_series import PoseSeries
 
 # An accepted VO update whose translation error exceeds max(FALSE_POSITIVE_M, FALSE_POSITIVE_FRACTION x the true
-# step) is a false positive (issue #17: 2 cm, or 5 % of a 35-75 cm step; MER VO's error was < 1 % of distance).
+# step) is a false positive (2 cm, or 5 % of a 35-75 cm step; MER VO's error was < 1 % of distance).
 FALSE_POSITIVE_M = 0.02
 FALSE_POSITIVE_FRACTION = 0.05
 
@@ -44,7 +44,7 @@ MIN_SLIP_TRAVEL_M = 0.05  # steps commanding less travel than this (turns in pla
 # errors as a percentage of distance need a distance: below this path length (a mast-only run, a zero-length drive,
 # a turn in place) the *_error_pct metrics are None (not measured) and only the errors in metres are reported
 MIN_DISTANCE_FOR_PCT_M = 0.1
-# KITTI-style segment lengths of travelled distance (issue #16); a length is scored only when the drive is longer
+# KITTI-style segment lengths of travelled distance; a length is scored only when the drive is longer
 SEGMENT_LENGTHS_M = (1.0, 5.0, 10.0)
 # VO covariance consistency: segments of this much true travel (m) over consecutive accepted steps
 NEES_SEGMENT_LENGTHS_M = (1.0, 5.0)
@@ -80,7 +80,7 @@ class VoStepRecord:
 
 @dataclass
 class Metrics:
-    """metrics.json (keys of the issue first, then extras)."""
+    """metrics.json (the core keys first, then extras)."""
 
     scenario: str
     seed: int
@@ -107,7 +107,7 @@ class Metrics:
     tall_rock_contacts: int = 0  # ticks with any rover geom touching a rock >= TALL_ROCK_M tall
     goal_distance_m: float | None = None
     sim_s: float = 0.0
-    # issue #16, errors that do not hide: {"vo"|"dead_reckoning": {"1m": %, "5m": %, "10m": %}} (segments of
+    # errors that do not hide: {"vo"|"dead_reckoning": {"1m": %, "5m": %, "10m": %}} (segments of
     # travelled distance, mean over every start record; "vo" None without VO) and the RMS of the position error
     # over every record of the drive (8 Hz, between VO updates too)
     kitti_segment_error_pct: dict = field(default_factory=dict)

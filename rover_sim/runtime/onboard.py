@@ -260,7 +260,7 @@ class Onboard:
         self._last_pair = (pair.left_u8, pair.right_u8, pair.rig, mask)
         return VoStep(res, commanded, slip, ms, pred, prev_R, mask)
 
-    # ------------------------------------------------------------------ texture-seeking pointing (issue #17)
+    # ------------------------------------------------------------------ texture-seeking pointing
     @property
     def texture_params(self) -> VoParams:
         return getattr(self.vo, "params", None) or VoParams()

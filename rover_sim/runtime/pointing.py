@@ -1,4 +1,4 @@
-"""Texture-seeking mast pointing before a VO step (issue #17, item 2), as MER's drivers pointed the navcams at
+"""Texture-seeking mast pointing before a VO step, as MER's drivers pointed the navcams at
 textured ground (rocks, outcrop edges, the rover's own tracks) for VO.
 
 Before each VO pair :func:`seek_texture` asks the onboard stack how many trackable features of the previous pair

@@ -2,9 +2,9 @@
 
 A :class:`~nav.trajectory.Pose` costs ~450 bytes in Python objects (the dataclass and two small arrays); a pose here
 costs 64 bytes (time, position, quaternion in float64), so a day-long drive's three pose histories (truth, dead
-reckoning, onboard; one pose a second over ~25 000 s of a 1 km drive) stay near 5 MB instead of ~35 MB (issue #18's
-memory bar: RSS after 1 km within 15 % of RSS after 100 m). Values are stored exactly: a pose read back equals the
-pose appended, so metrics are unchanged.
+reckoning, onboard; one pose a second over ~25 000 s of a 1 km drive) stay near 5 MB instead of ~35 MB (the traverse
+benchmark's memory bar: RSS after 1 km within 15 % of RSS after 100 m). Values are stored exactly: a pose read back
+equals the pose appended, so metrics are unchanged.
 """
 
 from __future__ import annotations

@@ -119,7 +119,7 @@ class Mission(RunRecording):
         self.vo_reset_listeners: list[Callable[[], None]] = []  # VO starts a new sequence (repointing, a new sol)
         self.extra_timing: dict = {}
         self._wall_s = 0.0
-        # a sol's drive (issue #18): budgets, mission clock, decimated poses and tracks, streamed terrain tiles
+        # a sol's drive: budgets, mission clock, decimated poses and tracks, streamed terrain tiles
         self.sol: SolBudget | None = SolBudget(scenario.sol, self.world.clock) if scenario.sol is not None else None
         self.pose_stride = scenario.sol.pose_stride if scenario.sol is not None else 1
         self._terrain_version = -1
@@ -258,7 +258,7 @@ class Mission(RunRecording):
                 self.reset_vo()
 
     def sleep(self, cmd: SleepCmd) -> None:
-        """End of sol: park with the wheels held and sleep to the next sol's wake-up time (issue #18).
+        """End of sol: park with the wheels held and sleep to the next sol's wake-up time.
 
         No physics is stepped overnight: a parked MER does not move (its wheel drives hold), and the wheel-soil law
         holds a parked rover on the plains, so the rover stays where it stopped; simulation time does not advance.
@@ -333,7 +333,7 @@ class Mission(RunRecording):
         if self.sol is not None:
             self.world.sync_clock()
             self.sol.on_tick(t, truth.position_xyz_m, self.onboard.dead_reckoning.distance_m)
-        if sim.soil_model != "bekker":  # the Wong-Reece law: left_terrain / slid_down_slope halts (issue #13)
+        if sim.soil_model != "bekker":  # the Wong-Reece law: left_terrain / slid_down_slope halts
             issue = sim.safety_issue()
             if issue is not None:
                 raise Halt(*issue)

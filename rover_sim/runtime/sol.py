@@ -1,4 +1,4 @@
-"""The sol's drive budget (issue #18): the mission clock charged by activity, distance by drive mode, and the stop.
+"""The sol's drive budget: the mission clock charged by activity, distance by drive mode, and the stop.
 
 MER drove a sol as a command sequence: blind segments the operators planned, then autonav for the rest of the
 day's time, visual odometry only where slopes called for it (Biesiadecki & Maimone 2006; Maimone et al. 2007).

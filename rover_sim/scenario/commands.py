@@ -62,7 +62,7 @@ class MastCmd(Spec):
 
 
 class SleepCmd(Spec):
-    """End of sol (issue #18): the rover parks, wheels held, and sleeps until the next sol's wake-up time on the
+    """End of sol: the rover parks, wheels held, and sleeps until the next sol's wake-up time on the
     mission clock; the next sol's budgets start then. Needs a ``[sol]`` table."""
 
     type: Literal["sleep"]
@@ -85,7 +85,7 @@ class KeepOut(Spec):
 
 
 class SolSpec(Spec):
-    """``[sol]``: the day's drive as MER flew it (issue #18): the commands run until the drive-time budget (mission
+    """``[sol]``: the day's drive as MER flew it: the commands run until the drive-time budget (mission
     clock: driving + imaging + computing, ``rover_sim/world/clock.py``) or the odometry distance budget is spent.
     A drive of several sols separates them with ``sleep`` commands: the budgets apply to each sol, and a sol whose
     budget is spent skips the rest of its commands up to the next ``sleep``. Long drives keep fewer poses

@@ -59,7 +59,7 @@ class PassSpec(Spec):
     max_body_collisions: int | None = Field(
         None, ge=0, le=1000, description="Ticks with the body touching anything, or any part touching a rock >= 25 cm."
     )
-    # embedding (issue #13, purgatory_ripple): the wheels' state at the end of the run, from truth
+    # embedding (purgatory_ripple): the wheels' state at the end of the run, from truth
     min_final_sinkage_m: float | None = Field(
         None, ge=0.0, le=0.5,
         description="Mean depth of the six wheels' bottoms below the undisturbed ground at the end (deformable).",

@@ -1,4 +1,4 @@
-"""``[sensors.lens]``: lens models, camera mounting, calibration and mast-encoder errors (issue #16).
+"""``[sensors.lens]``: lens models, camera mounting, calibration and mast-encoder errors.
 
 ``profile = "ideal"``: every camera is the MJCF pinhole, images arrive rectified, the onboard rig is exact, the mast
 points where commanded (today's behaviour, byte for byte). ``profile = "flight"``: the cameras form raw, distorted
@@ -43,7 +43,7 @@ stereo_rotation_deg        0.02           calibration error of the right camera 
                                           rows by 0.11 px (1 sigma) at 256^2, 0.43 px at 1024^2, and
                                           dominates the rectified row error: with the ground calibration
                                           alone the median row error of a draw (true vs calibrated models,
-                                          256^2 navcam) exceeds the issue's 0.3 px bar in 1.4 % of draws
+                                          256^2 navcam) exceeds the 0.3 px bar in 1.4 % of draws
                                           (1500 draws). The onboard epipolar check (``[nav]
                                           epipolar_check``, ``nav.epipolar``) fits the pitch and roll parts
                                           from the first pairs' rows (where this sigma moves rows by 0.05 px

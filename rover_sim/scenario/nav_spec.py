@@ -44,7 +44,7 @@ class VoSpec(Spec):
     impl: str = Field(BUILTIN, min_length=1, description=IMPL_DESCRIPTION)
     sanity: SanityConstraints = Field(default_factory=SanityConstraints)
     params: VoParams = Field(default_factory=VoParams)
-    shadow_mask: bool = Field(True, description="Bar features in and near the rover's predicted shadow (issue #17).")
+    shadow_mask: bool = Field(True, description="Bar features in and near the rover's predicted shadow.")
     seek_texture: bool = Field(True, description="Repoint the mast at texture when the planned view is poor.")
     update: Literal["position", "full_pose"] = Field(
         "position",

@@ -1,4 +1,4 @@
-"""``[sensors.odometry]``: odometry and attitude errors (issue #16 item 3); every term a seeded 1-sigma draw.
+"""``[sensors.odometry]``: odometry and attitude errors; every term a seeded 1-sigma draw.
 
 Where each error arises (:mod:`rover_sim.sim.sensors` applies them; the onboard geometry stays nominal):
 

@@ -48,7 +48,7 @@ class Scenario(Spec):
     physics: PhysicsSpec = Field(default_factory=PhysicsSpec)
     sensors: SensorsSpec = Field(default_factory=SensorsSpec)
     fast: bool = Field(False, description="Part of the fast CI suite.")
-    sol: SolSpec | None = Field(None, description="Drive-time and distance budgets of a sol's drive (issue #18).")
+    sol: SolSpec | None = Field(None, description="Drive-time and distance budgets of a sol's drive.")
     orbital: OrbitalSpec = Field(default_factory=OrbitalSpec, description="Orbital products' error model.")
 
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True)

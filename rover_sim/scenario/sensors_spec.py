@@ -1,6 +1,6 @@
-"""``[sensors]``: how far the simulated sensors are from ideal (issue #16).
+"""``[sensors]``: how far the simulated sensors are from ideal.
 
-``profile = "flight"`` gives every error term the size flight hardware had (README: Error budget);
+``profile = "flight"`` gives every error term the size flight hardware had (docs/physics/error-budget.md);
 ``profile = "ideal"`` zeroes them (perfect calibration, no lens distortion, exact odometry geometry). Every term
 stays configurable on its own and every random draw is seeded from the scenario seed.
 

@@ -15,7 +15,7 @@ MIN_SUN_ELEVATION_DEG = 2.0  # lowest sun the renderer is asked for (shadow maps
 
 class SunSpec(Spec):
     """The sun: fixed (``azimuth_deg``, ``elevation_deg``) or, with ``local_solar_time_h``, moving with the time of
-    day along the ephemeris (:mod:`rover_sim.sim.ephemeris`) while the mission clock runs (issue #16 item 4)."""
+    day along the ephemeris (:mod:`rover_sim.sim.ephemeris`) while the mission clock runs."""
 
     azimuth_deg: float = Field(135.0, ge=-360.0, le=360.0, description="From +x (east) toward +y (north).")
     elevation_deg: float = Field(45.0, ge=2.0, le=90.0, description="Above the horizon.")
@@ -58,7 +58,7 @@ class TexturePatch(Spec):
 class AppearanceSpec(Spec):
     """Ground albedo: ``fine_soil`` makes sand nearly featureless (Meridiani plains) to starve stereo and VO;
     ``texture_patches`` state where, inside it, the soil is coarse enough to track (the scenario says where
-    texture exists, issue #17)."""
+    texture exists)."""
 
     fine_soil: bool = False
     contrast: float = Field(1.0, gt=0.0, le=3.0, description="Albedo contrast multiplier.")
@@ -92,12 +92,12 @@ class PhysicsSpec(Spec):
         ge=0.0005,
         le=0.01,
         description="Physics step, s. 0.005 is the step the soil law was calibrated at (every catalogue scenario); a "
-        "coarser step trades slip accuracy for speed (README: Speed of long drives).",
+        "coarser step trades slip accuracy for speed (docs/physics/streamed-terrain.md).",
     )
     soil_model: Literal["bekker", "wong_reece"] = Field(
         "wong_reece",
         description="Wheel-soil law: 'wong_reece' (default: stress distribution, two-scale shear, the wheels' own "
-        "cylinder contact) or the earlier 'bekker' patch law (README: The wheel-soil law).",
+        "cylinder contact) or the earlier 'bekker' patch law (docs/physics/index.md).",
     )
     deformable: bool = Field(
         False, description="Ruts, berms and multipass in the heightfield (opt-in); needs 'wong_reece'."

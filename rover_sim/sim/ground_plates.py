@@ -1,6 +1,6 @@
 """The Wong–Reece law's own wheel–ground contact: the true 0.25 m x 0.16 m wheel cylinder on a ground plate.
 
-Issue #13 item 4. MuJoCo's sphere-versus-heightfield test is most of a bare physics step on the scenarios' 0.04 m
+MuJoCo's sphere-versus-heightfield test is most of a bare physics step on the scenarios' 0.04 m
 cells (it runs a convex collision against every cell prism under each of the six wheels: 72-77 of ~100 us,
 measured). With ``soil_model = "wong_reece"`` the wheel–ground contact is computed here instead, from the
 heightfield under the wheel's true cylinder:

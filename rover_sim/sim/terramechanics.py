@@ -136,7 +136,7 @@ class WheelSoilLaw:
         mass_share_kg: float = 29.0,
     ) -> None:
         self.radius_m = radius_m
-        # rolling radius r - z (issue #16): a sunk wheel advances (r - z) per radian, not r, so the wheel odometry
+        # rolling radius r - z: a sunk wheel advances (r - z) per radian, not r, so the wheel odometry
         # (nominal r) over-counts by z / r (about 5 % in the sim's sand). Off by default (today's law, on which the
         # slip anchors were calibrated); [sensors.odometry] sinkage_rolling_radius = true turns it on.
         self.sinkage_rolling_radius = False

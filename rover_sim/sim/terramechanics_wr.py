@@ -1,8 +1,8 @@
 """Wheel–soil law: Wong–Reece stress distribution under the MER wheel, driven by a shear-displacement state.
 
-The scenarios' default (``[physics] soil_model = "wong_reece"``, issue #13); ``"bekker"`` selects the earlier patch
-law, :mod:`rover_sim.sim.terramechanics`, which ``RoverSim(terrain)`` in Python still defaults to. See the README
-section "Wong–Reece soil" for what it was measured against and what it misses.
+The scenarios' default (``[physics] soil_model = "wong_reece"``); ``"bekker"`` selects the earlier patch
+law, :mod:`rover_sim.sim.terramechanics`, which ``RoverSim(terrain)`` in Python still defaults to. See
+docs/physics/index.md for what it was measured against and what it misses.
 
 MuJoCo supplies only the *normal* wheel load (wheel contacts are frictionless, ``condim=1``); every tangential
 force and the soil's torque on each wheel come from this module, for all six wheels each physics step. Slip is an
@@ -90,11 +90,11 @@ __all__ = [
 # Janosi-Hanamoto K fitted to a whole shear curve; the long scale here stands for the failure zone growing under a
 # grousered wheel, set by the wheel (contact length 8-12 cm) rather than by a shear-plate test. The curve's initial
 # modulus K_0 is 3.3 cm, and 63 % of the strength is mobilised at 5.8 cm. A CALIBRATION to the MER uphill slip
-# record (issue #13: <= 10 % at 0-5 deg, 40-65 % at 17-20 deg, >= 100 % from some slope in 25-32 deg, no 1 deg step
+# record (<= 10 % at 0-5 deg, 40-65 % at 17-20 deg, >= 100 % from some slope in 25-32 deg, no 1 deg step
 # above 8 pp in 10-25 deg), tuned on those rows of `rover-sim bench slip --soil-model wong_reece` only; the other
-# rows are held out (README, "Two-scale shear curve"). Tuned: w, K, K_2 / K, phi 29 -> 36 deg, a0 / a1 0.40 / 0.15
-# -> 0.43 / 0.32. With one K (Janosi-Hanamoto) no set inside the ranges met the 0-5 and 17-20 deg bars together (the
-# README's calibration trials 1 and 2 and a 146-set search).
+# rows are held out (docs/physics/index.md, "Two-scale shear curve"). Tuned: w, K, K_2 / K, phi 29 -> 36 deg,
+# a0 / a1 0.40 / 0.15 -> 0.43 / 0.32. With one K (Janosi-Hanamoto) no set inside the ranges met the 0-5 and 17-20 deg
+# bars together (trials with a larger K, with a larger slip-sinkage n1, and a 146-set search).
 SAND = SoilParams(
     name="sand",
     cohesion_pa=1000.0,

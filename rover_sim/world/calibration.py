@@ -1,4 +1,4 @@
-"""Per-run truth and calibration of the cameras, and the mast encoders (``[sensors.lens]``, issue #16).
+"""Per-run truth and calibration of the cameras, and the mast encoders (``[sensors.lens]``).
 
 One seeded draw per run (stream ``LENS_SEED_STREAM`` of the scenario seed) gives, per stereo pair:
 

@@ -3,13 +3,13 @@
 Physics time is only the driving. On Mars a drive also spent time imaging and computing on a 20 MHz RAD6000:
 about 160 s per visual-odometry step (seed 000, "2-3 min per step"), 24-30 s per stereo pair (seed 001) and
 about 70 s per GESTALT autonav cycle including its stereo (seed 001). A drive of tens of metres therefore took
-hours, during which the sun moved (issue #16 item 4) and the sol's time budget ran down (issue #18 item 2).
+hours, during which the sun moved and the sol's time budget ran down.
 
 :class:`MissionClock` accounts for it: the pipeline ``charge``s each activity as it happens (driving with the
 physics time it took) and anything that depends on the time of day (the sun's direction, the drive budget) reads
 ``local_solar_time_h`` or ``drive_s``. No randomness; the same run gives the same clock.
 
-A drive of several sols (issue #18) sleeps overnight: :meth:`MissionClock.sleep_until` charges the night as
+A drive of several sols sleeps overnight: :meth:`MissionClock.sleep_until` charges the night as
 ``sleeping`` up to the next sol's wake-up time. Sleeping moves the time of day (and so the sun) but is not drive
 time: ``drive_s`` (what a sol's drive-time budget counts) sums driving, imaging and computing only.
 """

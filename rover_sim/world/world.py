@@ -108,7 +108,7 @@ class World:
     def __init__(self, scenario: Scenario) -> None:
         self.scenario = scenario
         ap = scenario.appearance
-        # the mission clock: with a moving sun (issue #16 item 4) or a sol's time budget (issue #18)
+        # the mission clock: with a moving sun or a sol's time budget
         lst = scenario.sun.local_solar_time_h
         start_h = lst if lst is not None else (scenario.sol.start_local_solar_time_h if scenario.sol else None)
         self.clock = MissionClock(start_h) if start_h is not None else None

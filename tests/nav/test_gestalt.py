@@ -390,7 +390,7 @@ def test_a_backward_arc_faces_away_from_the_way_it_backs() -> None:
     """Goal 6 m straight behind on open ground, path-cost votes: backing straight gains the step's distance
     (progress +1) but leaves the rover facing away from the goal (heading -1), so its vote is 0.5, not the 1.0 it
     got while the heading was judged by backing on along the circle (then GESTALT backed blind for metres:
-    spirit_autonav on the Wong-Reece law backed 5 m into the site's edge, session 9). Facing the goal, the same
+    spirit_autonav on the Wong-Reece law backed 5 m into the site's edge). Facing the goal, the same
     backward arc loses ground and faces the right way: 0.5 again. Driving forward away from the goal: 0."""
     arc_list = arcs(P)
     back = next(k for k, a in enumerate(arc_list) if a.direction == -1 and a.curvature_per_m == 0.0)

@@ -1,4 +1,4 @@
-"""Stereo at any size (issue #16 item 7): the SAD engines are exact for large and non-square pairs (the compiled
+"""Stereo at any size: the SAD engines are exact for large and non-square pairs (the compiled
 engine; the OpenCV engine with or without the SAD volume), and full-resolution pairs run end to end (library and
 ``rover-sim stereo``)."""
 

@@ -311,7 +311,7 @@ def test_sanity_constraints_reject_too_large_update():
     ],
 )
 def test_default_sanity_constraints_reject_a_crafted_bad_update(motion, word):
-    """Issue #17: MER's step-8 constraints are on by default with flight-like limits."""
+    """MER's step-8 constraints are on by default with flight-like limits."""
     pred = se3(np.eye(3), np.array([0.35, 0.0, 0.0]))
     c = SanityConstraints()
     assert sanity_check(pred, pred, c) == (True, "")

@@ -1,4 +1,4 @@
-"""The autonav benchmark's fields are what issue #4 asks for: 10 % rock cover, rocks up to 60 cm, goal 20 m away,
+"""The autonav benchmark's fields are as specified: 10 % rock cover, rocks up to 60 cm, goal 20 m away,
 with rocks the rover must not touch (>= 25 cm) in its way; and the loop drives on its own pose with VO on."""
 
 from __future__ import annotations

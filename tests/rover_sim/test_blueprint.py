@@ -1,4 +1,4 @@
-"""The recording opens on what the run used (issue #15): hazcams and the goodness map for autonav, the VO camera
+"""The recording opens on what the run used: hazcams and the goodness map for autonav, the VO camera
 and slip series for VO runs, no VO series without VO; `rover-sim view` prints a web URL on a headless machine."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Clean failure modes of the CLI (issue #15): exit statuses, SIGTERM/Ctrl-C mid-run and during setup, one-line
+"""Clean failure modes of the CLI: exit statuses, SIGTERM/Ctrl-C mid-run and during setup, one-line
 errors for bad input, --out safety, zero-distance runs, JUnit output and the user's own suite baseline."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The moving sun (issue #16 item 4): Mars ephemeris and shadows that move between pairs hours apart."""
+"""The moving sun: Mars ephemeris and shadows that move between pairs hours apart."""
 
 from __future__ import annotations
 

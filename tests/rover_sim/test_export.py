@@ -1,4 +1,4 @@
-"""Dataset export (issue #15): one short run written as KITTI, EuRoC and a ROS 2 bag at once, read back with
+"""Dataset export: one short run written as KITTI, EuRoC and a ROS 2 bag at once, read back with
 pykitti, plain CSV/YAML parsing and rosbags; ground truth against the run's truth.tum; strictly increasing stamps;
 a rate export through the CLI leaves the run unchanged; bad options fail in one line."""
 

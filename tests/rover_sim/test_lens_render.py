@@ -1,4 +1,4 @@
-"""Raw images through the true lenses, and onboard rectification with the calibrated models (issue #16)."""
+"""Raw images through the true lenses, and onboard rectification with the calibrated models."""
 
 from __future__ import annotations
 
@@ -119,7 +119,7 @@ def row_disparity_px(left: np.ndarray, right: np.ndarray) -> np.ndarray:
     return np.abs(uv_r[:, 1] - uv_l[:, 1])
 
 
-# The 0.31-0.32 px navcam draws of issue #16 were diagnosed on calibration seeds 1-8 (truth: seed 3) and on the
+# The 0.31-0.32 px navcam draws were diagnosed on calibration seeds 1-8 (truth: seed 3) and on the
 # exact calibrations of truth seeds 11-15; the bar is asserted on these other draws, fixed before looking at them.
 CALIBRATION_SEEDS = range(101, 109)
 
@@ -243,7 +243,7 @@ def test_rectification_measured_row_disparity_matches_the_models(render_world, l
 
 @pytest.mark.parametrize("pair", ["hazcam_front", "navcam"])
 def test_rectified_flight_pairs_have_small_row_disparity(render_world, lens_renderer, pair) -> None:
-    """Issue #16 bar: every flight calibration draw leaves a median row disparity <= 0.3 px on matched corners of
+    """Rectification: every flight calibration draw leaves a median row disparity <= 0.3 px on matched corners of
     the rectified pair (8 held-out draws, :data:`CALIBRATION_SEEDS`, on one true pair), measured and as predicted
     from the models, once the onboard epipolar check (``nav.epipolar``) has fitted the relative pitch and roll on
     *another* scene (the rover turned 30 deg). The navcam's ground calibration alone does not meet the bar on

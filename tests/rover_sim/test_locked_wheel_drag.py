@@ -5,8 +5,8 @@ soil's drag on a locked wheel acts at its contact, about 0.43 m below the rocker
 it turns the rocker about its pivot. Leading (driving forward), the drag pushes the wheel down: with a drag of about
 0.9 of its load the moment nearly equals the wheel load's about the pivot (0.40 m ahead). The wheel then carries far
 more than its static share, the bogie on that side unloads and the rover crawls. Trailing (driving backwards), the
-same drag lifts the wheel. This is the mechanics behind ``columbia_hills_drag``'s forward drive crawling or stalling
-(issue #13); the drives here are on flat sand so both directions meet the same ground.
+same drag lifts the wheel. This is the mechanics behind ``columbia_hills_drag``'s forward drive crawling or stalling;
+the drives here are on flat sand so both directions meet the same ground.
 """
 
 from __future__ import annotations

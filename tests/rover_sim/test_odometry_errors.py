@@ -1,4 +1,4 @@
-"""[sensors.odometry] (issue #16 item 3): odometry and attitude errors, dead reckoning at 8 Hz, VO update modes,
+"""[sensors.odometry]: odometry and attitude errors, dead reckoning at 8 Hz, VO update modes,
 and the segment / RMS error metrics."""
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from rover_sim.sim.sensors import EncoderModel, ImuModel, OdometryErrors
 from rover_sim.world.observation import Observation
 from rover_sim.world.world import with_heading_error
 
-# flat, firm, benign ground; VO off: the dead-reckoning acceptance of issue #16 on a short drive
+# flat, firm, benign ground; VO off: the dead-reckoning acceptance bar on a short drive
 FLAT = {
     "name": "flat_dr",
     "seed": 5,
@@ -171,7 +171,7 @@ def test_vo_covariance_nees_tells_consistent_optimistic_and_biased_covariances_a
 
 @pytest.mark.slow
 def test_flight_dead_reckoning_is_worse_than_ideal_but_within_the_mer_goal(tmp_path):
-    """Issue #16 acceptance on a short drive: flat benign ground, flight DR error > ideal and <= 10 % of distance."""
+    """The dead-reckoning bar on a short drive: flat benign ground, flight DR error > ideal and <= 10 % of distance."""
     ideal = run_scenario(scenario_from_dict(FLAT), tmp_path / "ideal", record=False)
     flight = run_scenario(scenario_from_dict(FLAT | {"sensors": {"profile": "flight"}}), tmp_path / "flight",
                           record=False)  # fmt: skip

@@ -1,4 +1,4 @@
-"""purgatory_ripple (issue #13 item 5): Opportunity's Sol 446 embedding in a ripple of loose drift, and the same
+"""purgatory_ripple: Opportunity's Sol 446 embedding in a ripple of loose drift, and the same
 drive halted by MER's later VO slip check. Schema, judging and the digging-in mechanism (fast); both scenarios run
 and judged (slow)."""
 

@@ -146,7 +146,7 @@ def small_site_scenario():
             "start": {"x_m": 0.0, "y_m": 0.0, "yaw_deg": 35.0},
             "nav": {"vo": False},
             "sensors": {"profile": "ideal"},  # the survey renders its own pinhole panoramas
-            "appearance": {"regolith": "classic"},  # the survey was built and measured on this soil (README)
+            "appearance": {"regolith": "classic"},  # the survey was built and measured on this soil
             "commands": [{"type": "turn", "angle_deg": 0.0}],
         }
     )
@@ -257,7 +257,7 @@ def test_bench_rocks_meets_the_acceptance(tmp_path) -> None:
 
 @pytest.mark.slow
 def test_bench_rocks_meets_the_issue_bar_on_the_flight_profile() -> None:
-    """Issue #16: with half the rocks irregular, on the flight profile, recall and precision >= 0.85 and median
+    """With half the rocks irregular, on the flight profile, recall and precision >= 0.85 and median
     model RMS <= 4 cm for each rock class (rocks > 20 cm within 30 m), and the chain beats VO alone."""
     from rover_sim.bench.rocks import bench_rocks
 

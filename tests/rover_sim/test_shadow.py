@@ -1,4 +1,4 @@
-"""The onboard shadow prediction (nav.vo.shadow) against a ground-truth render (issue #17, item 1).
+"""The onboard shadow prediction (nav.vo.shadow) against a ground-truth render.
 
 Truth: the same navcam view rendered with and without shadows (no image noise); terrain pixels (segmentation)
 that the shadow darkens are the rover's shadow (no rocks in this field). The prediction uses only onboard

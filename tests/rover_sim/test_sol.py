@@ -1,4 +1,4 @@
-"""The sol's drive budget (issue #18): mission-clock charging, distance by mode, and the stop."""
+"""The sol's drive budget: mission-clock charging, distance by mode, and the stop."""
 
 from __future__ import annotations
 

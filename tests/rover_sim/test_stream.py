@@ -1,4 +1,4 @@
-"""Streamed terrain (issue #18): deterministic tiles, seamless windows, and a drive across a window re-centre
+"""Streamed terrain: deterministic tiles, seamless windows, and a drive across a window re-centre
 that is indistinguishable from the same drive on a static terrain."""
 
 from __future__ import annotations

@@ -240,7 +240,7 @@ def test_verdict_lives_in_the_acceptance_module():
 
 @pytest.mark.slow
 def test_bench_wheel_end_to_end_on_a_subset(tmp_path):
-    """Every slip angle, both wheels, a few rows: the JSON has the issue's keys, one row per input row in order."""
+    """Every slip angle, both wheels, a few rows: the JSON has the documented keys, one row per input row in order."""
     rows = (cmu_data_path()).read_text().splitlines()
     keep = [rows[0]] + [r for k, r in enumerate(rows[1:]) if k % 12 == 0]
     data = tmp_path / "subset.csv"
