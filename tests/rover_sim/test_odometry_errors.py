@@ -205,7 +205,7 @@ def test_bench_suite_runs_both_profiles_and_gates_only_the_baseline_profile(tmp_
         return []
 
     monkeypatch.setattr(seeded, "run_jobs", fake_run_jobs)
-    monkeypatch.setattr(suite, "scenario_names", lambda fast: ["wopmay"])
+    monkeypatch.setattr(suite, "scenario_names", lambda fast, only=(): ["wopmay"])
     seeds = Seeds(tuple(range(200, 212)), "gate")
     base = tmp_path / "base.json"
     r = suite.bench_suite(None, seeds, out_root=tmp_path, baseline_path=base, update_baseline=True, workers=0)
