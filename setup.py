@@ -11,7 +11,7 @@ from setuptools import find_namespace_packages, find_packages, setup
 DATA_FOLDERS = {  # source folder -> files shipped from it and from every folder below it
     "models": ["*"],  # MJCF, README and any mesh or texture assets beside them
     "scenarios": ["*.toml", "*.md"],
-    "benchmarks": ["*.json", "*.md", "*.toml", "*.csv", "*.txt"],  # data/: measured data sets with their licences
+    "benchmarks": ["*.json", "*.md", "*.toml"],
 }
 
 packages = find_packages(include=["rover_sim", "rover_sim.*", "nav", "nav.*", "terrains", "terrains.*"])

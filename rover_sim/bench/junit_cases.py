@@ -26,25 +26,6 @@ def mobility_cases(result: dict) -> list[Case]:
     return verdict_cases(bars.mobility_verdict(result), "bench.slip.wong_reece")
 
 
-def wheel_cases(result: dict) -> list[Case]:
-    """`bench wheel`: one case per wheel, band and quantity, one per wheel's 0 deg monotonicity; a failure's
-    message is the verdict's reason (rover_sim.runtime.acceptance.bars.judge_wheel)."""
-    out = []
-    for name, w in result["wheels"].items():
-        for band in bars.WHEEL.bands:
-            for q in bars.WHEEL_QUANTITIES:
-                v = w["rmse_by_band"][band.key][q]
-                if v is not None:
-                    why = next((r for r in result["reasons"] if r.startswith(f"{name} {band.key} deg: {q} ")), "")
-                    out.append(case(f"{name} {band.key} deg {q}", "bench.wheel", not why, why))
-        if any(r["wheel"] == name and r["slip_angle_deg"] == 0.0 for r in result["rows"]):
-            why = next((r for r in result["reasons"] if r.startswith(f"{name} 0 deg: drawbar")), "")
-            out.append(case(f"{name} 0 deg drawbar pull non-decreasing in slip", "bench.wheel", not why, why))
-    if not out:
-        out.append(case("bench wheel", "bench.wheel", result["passed"], "; ".join(result["reasons"])))
-    return out
-
-
 def autonav_cases(result: dict) -> list[Case]:
     """One case per field (reached within the bar's distance, no collision) and one for the summary bar."""
     cls = f"bench.autonav.{result.get('stack', 'builtin')}"

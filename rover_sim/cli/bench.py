@@ -54,41 +54,6 @@ def bench_slip(
     finish(junit, "bench slip", cases)
 
 
-@bench_app.command("wheel")
-def bench_wheel_cmd(
-    json: JsonOpt = None,
-    data: Annotated[
-        Path | None,
-        typer.Option(
-            "--data",
-            help="CSV of single-wheel tests: columns wheel, slip_angle_deg, slip, load_N "
-            "(drawbar_pull_N, lateral_force_N, sinkage_mm scored when present) [default: the CMU tests].",
-        ),
-    ] = None,
-    wheel: Annotated[
-        str | None,
-        typer.Option(
-            "--wheel",
-            help="Geometry of every row: grouser | smooth | mer (default: the wheel "
-            "column, or radius_m / width_m / grouser_height_m columns).",
-        ),
-    ] = None,
-    png: Annotated[str, typer.Option(help="PNG grid: measured vs the rig per slip angle and quantity.")] = (
-        "runs/bench_wheel.png"
-    ),
-    junit: JunitOpt = None,
-) -> None:
-    """Single-wheel rig on the rover's wheel-soil law (soil bin, deformable heightfield) against measured tests:
-    RMSE of drawbar pull, lateral force and sinkage per wheel and slip-angle band; drawbar pull monotone at 0 deg."""
-    preflight("bench wheel", junit, files={"--json": json, "--png": png})
-    with guarded(junit, "bench wheel"):
-        from rover_sim.bench.junit_cases import wheel_cases
-        from rover_sim.bench.wheel import bench_wheel
-
-        result = bench_wheel(data, str(json) if json else None, wheel=wheel, png_path=png)
-    finish(junit, "bench wheel", wheel_cases(result))
-
-
 @bench_app.command("render")
 def bench_render_cmd(json: JsonOpt = None, junit: JunitOpt = None) -> None:
     """Render timings: 256x256 stereo pair and 1024x1024 image, with and without shadows."""

@@ -44,16 +44,11 @@ from rover_sim.sim.wr_kernel import (
     P_ALPHA,
     P_BASE,
     P_CELL,
-    P_DEEPEN,
-    P_FRONT,
-    P_LEAD,
     P_SCALE,
-    P_UPDATE,
     P_WALL_TAN,
     P_WIDTH,
     P_X0,
     P_Y0,
-    UPDATE_M,
     deform_after_law,
 )
 
@@ -82,18 +77,9 @@ class DeformingSim(Protocol):
 
 
 class DeformableTerrain:
-    """The heightfield of ``sim`` made deformable; ``heights_m()`` is the current surface (same grid as the terrain).
+    """The heightfield of ``sim`` made deformable; ``heights_m()`` is the current surface (same grid as the terrain)."""
 
-    ``wheels`` names the wheel bodies ``wheel_<w>`` in the law's order (the rover's six by default; the single-wheel
-    rig has one); ``update_m`` is the contact travel between a wheel's rut writes; ``front_m`` how far beyond half
-    its contact patch and that travel a rut is written ahead of and behind a wheel (default 1.5 cells: the rover's
-    cells are coarse next to its wheel; a fine grid under a small wheel needs its radius, so that the floor reaches
-    the point where the rim meets the surface); ``deepen_m`` the growth of a wheel's sinkage that makes it write
-    again where it stands (a light wheel dropped by a 1 mm step leaves the ground for a few steps)."""
-
-    def __init__(self, sim: DeformingSim, deformable_materials: tuple[bool, ...], wheels: tuple[str, ...] = WHEELS,
-                 update_m: float = UPDATE_M, front_m: float | None = None,
-                 deepen_m: float = 0.001) -> None:  # fmt: skip
+    def __init__(self, sim: DeformingSim, deformable_materials: tuple[bool, ...]) -> None:
         m, t = sim.model, sim.terrain
         self.model = m
         hid = m.hfield("terrain").id
@@ -109,26 +95,21 @@ class DeformableTerrain:
         self._soft = np.ascontiguousarray(np.asarray(deformable_materials, dtype=bool)[mats])
         self._soft_material = np.asarray(deformable_materials, dtype=bool)
         self._hf = m.hfield_data
-        n = len(wheels)
-        self._last = np.tile([np.inf, np.inf, 0.0], (n, 1))  # contact x, y and sinkage at each wheel's last write
-        self._zf = np.zeros(n)  # sinkage low-passed over SINK_FILTER_S (load spikes of vibration do not dig)
-        params = np.zeros(12)  # wr_kernel.P_* entries
+        self._last = np.tile([np.inf, np.inf, 0.0], (6, 1))  # contact x, y and sinkage at each wheel's last write
+        self._zf = np.zeros(6)  # sinkage low-passed over SINK_FILTER_S (load spikes of vibration do not dig)
+        params = np.zeros(8)  # wr_kernel.P_* entries
         params[P_CELL], params[P_X0], params[P_Y0] = self._cell, self._x0, self._y0
         params[P_BASE] = float(m.geom("terrain").pos[2])
         params[P_SCALE] = float(m.hfield_size[hid][2])  # elevation range
         params[P_ALPHA] = sim.timestep_s / (SINK_FILTER_S + sim.timestep_s)
         params[P_WIDTH] = sim.law.width_m
         params[P_WALL_TAN] = math.tan(math.radians(REPOSE_DEG))
-        params[P_UPDATE] = update_m
-        params[P_FRONT] = 1.5 * self._cell if front_m is None else front_m
-        params[P_LEAD] = 2.5 * self._cell if front_m is None else front_m + self._cell
-        params[P_DEEPEN] = deepen_m
         self._params = params
         self.enabled = True
         # (valid, i0, i1, j0, j1) cells changed since pop_dirty_cells (row _RENDER) / pop_dirty_cells_for_log (_LOG)
         self._dirty = np.zeros((2, 5), dtype=np.int64)
         self._xpos = sim.data.xpos  # body positions (a live view): the wheel centres
-        self._wheel_ids = np.array([m.body(f"wheel_{w}").id for w in wheels], dtype=np.int64)
+        self._wheel_ids = np.array([m.body(f"wheel_{w}").id for w in WHEELS], dtype=np.int64)
 
     # ------------------------------------------------------------------ state
     def heights_m(self) -> np.ndarray:

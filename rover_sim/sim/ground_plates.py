@@ -50,12 +50,11 @@ _SAMPLE_ACROSS = 0.5  # wheel, so a rut's end does not tilt it: the law has the 
 # ... and +-0.5 half-widths across it (inside the tread)
 
 
-def add_ground_plates(spec: mujoco.MjSpec, radius_m: float, width_m: float, wheels: tuple[str, ...] = WHEELS) -> None:
-    """Turn ``spec``'s wheels (geoms ``wheel_<w>`` with contact sensors ``wheel_<w>_contact``, ``w`` in ``wheels``)
-    into cylinders on ground plates (module docstring), in place."""
-    wheel_geoms = [spec.geom(f"wheel_{w}") for w in wheels]
+def add_ground_plates(spec: mujoco.MjSpec, radius_m: float, width_m: float) -> None:
+    """Turn ``spec``'s wheels into cylinders on ground plates (module docstring), in place."""
+    wheel_geoms = [spec.geom(f"wheel_{w}") for w in WHEELS]
     solref, solimp = list(wheel_geoms[0].solref), list(wheel_geoms[0].solimp)
-    for w, g in zip(wheels, wheel_geoms, strict=True):
+    for w, g in zip(WHEELS, wheel_geoms, strict=True):
         g.type = mujoco.mjtGeom.mjGEOM_CYLINDER
         g.size = [radius_m, 0.5 * width_m, 0.0]
         g.quat = [math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0]  # the cylinder's axis along the axle (body y)
@@ -86,15 +85,13 @@ class GroundPlates:
     """Places the six ground plates of a model built with :func:`add_ground_plates` (call :meth:`place` before
     each physics step; :meth:`set_terrain` after the heightfield's window or encoding changes)."""
 
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, radius_m: float, width_m: float,
-                 wheels: tuple[str, ...] = WHEELS) -> None:  # fmt: skip
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, radius_m: float, width_m: float) -> None:
         self.model, self.data = model, data
-        n = len(wheels)
-        # ints: wheel body ids (n), plate mocap ids (n), heightfield address, rows, columns (one array: each array
+        # ints: wheel body ids (6), plate mocap ids (6), heightfield address, rows, columns (one array: each array
         # argument of a compiled call costs dispatch time, and this runs every step)
-        self._ints = np.zeros(2 * n + 3, dtype=np.int64)
-        self._ints[:n] = [model.body(f"wheel_{w}").id for w in wheels]
-        self._ints[n : 2 * n] = [model.body_mocapid[model.body(f"{PLATE_PREFIX}{w}").id] for w in wheels]
+        self._ints = np.zeros(15, dtype=np.int64)
+        self._ints[:6] = [model.body(f"wheel_{w}").id for w in WHEELS]
+        self._ints[6:12] = [model.body_mocapid[model.body(f"{PLATE_PREFIX}{w}").id] for w in WHEELS]
         # live views into MjModel / MjData (valid for their lifetime)
         self._xpos, self._xmat, self._hf = data.xpos, data.xmat, model.hfield_data
         self._mocap_pos, self._mocap_quat = data.mocap_pos, data.mocap_quat
@@ -106,7 +103,7 @@ class GroundPlates:
         m = self.model
         hid = m.hfield("terrain").id
         gid = m.geom("terrain").id
-        self._ints[-3:] = m.hfield_adr[hid], m.hfield_nrow[hid], m.hfield_ncol[hid]
+        self._ints[12:15] = m.hfield_adr[hid], m.hfield_nrow[hid], m.hfield_ncol[hid]
         half_x, half_y, scale, _ = m.hfield_size[hid]
         p = self._params
         p[G_X0], p[G_Y0] = m.geom_pos[gid][0] - half_x, m.geom_pos[gid][1] - half_y
@@ -133,12 +130,11 @@ def _height(hf: np.ndarray, adr: int, nrow: int, ncol: int, p: np.ndarray, x: fl
 def place_plates(xpos: np.ndarray, xmat: np.ndarray, hf: np.ndarray, ints: np.ndarray, p: np.ndarray,
                  mocap_pos: np.ndarray, mocap_quat: np.ndarray) -> None:  # fmt: skip
     """Each wheel's ground plate (module docstring): normal from a least-squares plane over the footprint, offset
-    from the highest ground the rim meets; written into ``mocap_pos`` / ``mocap_quat``. ``ints``: the n wheel
-    body ids, the n plates' mocap ids, then the heightfield's address in ``hf``, its rows and columns."""
+    from the highest ground the rim meets; written into ``mocap_pos`` / ``mocap_quat``. ``ints``: the six wheel
+    body ids, the six plates' mocap ids, then the heightfield's address in ``hf``, its rows and columns."""
     r, hw, cell = p[G_RADIUS], p[G_HALF_WIDTH], p[G_CELL]
-    nw = (ints.shape[0] - 3) // 2
-    adr, nrow, ncol = ints[2 * nw], ints[2 * nw + 1], ints[2 * nw + 2]
-    for w in range(nw):
+    adr, nrow, ncol = ints[12], ints[13], ints[14]
+    for w in range(6):
         b = ints[w]
         cx, cy, cz = xpos[b, 0], xpos[b, 1], xpos[b, 2]
         ax, ay = xmat[b, 1], xmat[b, 4]  # the axle: the wheel body's y axis (its spin axis)
@@ -192,7 +188,7 @@ def place_plates(xpos: np.ndarray, xmat: np.ndarray, hf: np.ndarray, ints: np.nd
         h_c = _height(hf, adr, nrow, ncol, p, cx, cy) - cz  # the ground under the centre (coarse cells)
         best = max(best, h_c * nz)
         # the plate: the wheel centre projected onto the plane n . (x - c) = best
-        m = ints[nw + w]
+        m = ints[6 + w]
         mocap_pos[m, 0], mocap_pos[m, 1], mocap_pos[m, 2] = cx + best * nx, cy + best * ny, cz + best * nz
         # rotation taking z to n: about (z x n) by acos(nz)
         half = 0.5 * math.acos(min(max(nz, -1.0), 1.0))

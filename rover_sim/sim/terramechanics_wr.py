@@ -9,12 +9,9 @@ force and the soil's torque on each wheel come from this module, for all six whe
 outcome of the soil law, the load on each wheel and the slope — nothing is scripted.
 
 The steady-state physics is the Wong–Reece integration of :mod:`rover_sim.sim.soil_tables` (Bekker normal stress
-with Ding et al.'s slip-dependent sinkage exponent for both signs of slip, Mohr–Coulomb shear mobilised over two
-deformation scales along the rim (``soil_tables.mobilisation``; Janosi–Hanamoto for every material but SAND), the
-wheel's grousers or smooth rim, the MER wheel's compliant rim, a rear contact where the soil rebounds, Hegedus
-bulldozing of the berm ahead of a dragged wheel), tabulated once per material and wheel over (load, slip). The same
-law drives the single-wheel rig (:mod:`rover_sim.sim.wheel_rig`, ``rover-sim bench wheel``) that scores it against
-measured wheel tests (docs/physics/wheel-validation.md). Per wheel and step:
+with Ding et al.'s slip-dependent sinkage exponent, Mohr–Coulomb shear mobilised over two deformation scales
+along the rim (``soil_tables.mobilisation``; Janosi–Hanamoto for every material but SAND), the MER wheel's grousers
+and compliant rim, Hegedus bulldozing), tabulated once per material over (load, slip). Per wheel and step:
 
 1. **Longitudinal shear state** ``j_x``: the shear displacement the soil has accumulated at the rear of the patch.
    Under a wheel rolling at steady slip ``i`` it is ``i L`` (``L`` the contact length; Wong–Reece's ``j(theta2)``).
@@ -24,9 +21,7 @@ measured wheel tests (docs/physics/wheel-validation.md). Per wheel and step:
    motion is unaffected. The slip the soil has mobilised is ``i_m = j_x / L`` (in ``[-1, 1]``; ``-1`` a dragged,
    locked wheel); at rest ``j`` is held, so a held wheel is held by the soil acting as a spring.
 2. **Stresses**: sinkage ``z``, thrust ``H``, compaction resistance ``R`` and torque ``T`` at (load, ``i_m``) from
-   the table (bilinear). Nothing depends on speed: quasi-static slip is the same at 1 and 5 cm/s. The patch length
-   moves half way to the table's each step (``wr_kernel.PATCH_RELAX``: the fixed point ``L = L(j / L)`` is unstable
-   where deep slip-sinkage makes the patch grow steeply with slip; the steady state is unchanged).
+   the table (bilinear). Nothing depends on speed: quasi-static slip is the same at 1 and 5 cm/s.
 3. **Compaction resistance as a reaction**: the front-loaded stress distribution that resists motion exists only
    once the wheel pushes into the soil ahead. A bow state ``e`` (clamped to ``+-BOW_M``, the displacement over which
    it forms) makes the resistance ``R e / BOW_M``: full while advancing, relaxed after the wheel stops or reverses
@@ -35,15 +30,8 @@ measured wheel tests (docs/physics/wheel-validation.md). Per wheel and step:
    ``z_p`` to ``z``; multipass).
 4. **Lateral**: its own shear state ``j_y`` (steady ``-v_y L / V``, Ishigami et al. 2007) with its own modulus
    ``K_y``, the mean Janosi–Hanamoto mobilisation over the patch (one scale sideways, whatever the rim's curve),
-   plus the side-wall bulldozing of the wheel's submerged face (Hegedus over the face, as Ishigami et al. 2007;
-   ``wr_kernel.side_wall_n``, valid past the wheel's radius), mobilised by the whole sideways displacement
-   ``1 - exp(-|j_y| / K_y)``; as the wheel advances, that face rubs along the soil it pushes (Coulomb, the skin
-   friction of a smooth face ``tan(delta) = f tan(phi)``, Potyondy 1961), a resistance along the heading. Lateral
-   slip also deepens the sinkage: the slip-sinkage of the whole shear displacement ``hypot(i_m, |j_y| / L)``
-   beyond that of ``i_m`` alone (an isotropic soil: Ding et al.'s exponent does not know the direction of shear;
-   the table's last column), and at the same load the compaction resistance of the deeper wheel grows as
-   ``sqrt(z / z_i)`` (Bekker's rigid wheel: ``R / W`` grows as the square root of the sinkage). With no sideways
-   slip none of these act.
+   plus the side-wall bulldozing of the sunk wheel face (Hegedus); lateral slip also deepens the sinkage (the
+   table's sinkage at the lateral slip ``|j_y| / L`` when larger than ``|i_m|``: lateral sinkage).
 5. **Strength**: the tangential shear is bounded by ``c A + W tan(phi)`` (bulldozing on top); a damping term on the
    shear states (LuGre ``sigma_1``, from the curve's initial stiffness ``F_max / 2 K_0``) keeps the stiff rock
    springs stable at a 5 ms step; it vanishes at steady state.
@@ -64,15 +52,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_table, hegedus_coefficients
+from rover_sim.sim.soil_tables import N_LOAD, SoilParams, WheelParams, build_table
 from rover_sim.sim.wr_kernel import table_lookup, wr_wheels
 
 __all__ = [
     "BEDROCK",
-    "CMU_SAND",
     "DRIFT",
-    "K10_MINI_GROUSER",
-    "K10_MINI_SMOOTH",
     "MATERIALS",
     "MIXED",
     "SAND",
@@ -175,34 +160,6 @@ DRIFT = SoilParams(
 # Index order matches terrains.Material (SAND=0, BEDROCK=1, MIXED=2, DRIFT=3); rocks are treated as BEDROCK.
 MATERIALS: tuple[SoilParams, ...] = (SAND, BEDROCK, MIXED, DRIFT)
 
-# The laboratory sand of the CMU single-wheel tests (benchmarks/data/cmu_single_wheel; `rover-sim bench wheel`), on
-# Earth: the same law as the rover's soils, its own parameter set. CALIBRATED by scripts/calibrate_cmu_soil.py on
-# the 0 and 90 deg rows of those tests only (30 and 60 deg held out; docs/physics/wheel-validation.md), inside the
-# published ranges of REFERENCE.md section 2; density 1330 kg/m^3 as reported by the data's authors (not fitted).
-CMU_SAND = SoilParams(
-    name="cmu_sand",
-    cohesion_pa=828.0,
-    friction_angle_deg=29.08,
-    shear_modulus_m=0.02414,
-    lateral_shear_modulus_m=0.02414,
-    k_c=4014.0,
-    k_phi=2.282e6,
-    n0=1.058,
-    n1=0.5568,
-    a0=0.4449,
-    a1=0.01436,
-    density_kg_m3=1330.0,
-    gravity_m_s2=9.81,
-    rebound_ratio=0.3103,
-    smooth_rim_friction=0.726,
-)
-
-# The K10-mini wheel of those tests: radius 0.058 m to the base of the grousers, width 0.05 m, 5 mm grousers or a
-# smooth rim (the data's README and its source's model parameters; the number of grousers is not given there and
-# the law does not use it). A rigid rim: no flat patch.
-K10_MINI_GROUSER = WheelParams(radius_m=0.058, width_m=0.05, grouser_height_m=0.005, flat_patch_m=0.0)
-K10_MINI_SMOOTH = WheelParams(radius_m=0.058, width_m=0.05, grouser_height_m=0.0, flat_patch_m=0.0)
-
 # BOW_M (the advance over which the front-loaded, resisting stress distribution forms) and the other per-step
 # constants live with the compiled arithmetic in rover_sim/sim/wr_kernel.py.
 _STATE_ROWS = ("jx", "jy", "bow", "patch", "presink")  # rows of WheelSoilLaw.state_arrays()
@@ -259,12 +216,10 @@ class WheelSoilLaw:
                     m.n0,
                     m.n1,
                     m.initial_shear_modulus_m,
-                    *hegedus_coefficients(m),
-                    m.smooth_rim_friction,
                 )
             )
         self._tables = np.ascontiguousarray(tables)  # (materials, N_SLIP * N_LOAD, 7)
-        self._consts = np.array(consts, dtype=float)  # (materials, 12): wr_kernel.C_* columns
+        self._consts = np.array(consts, dtype=float)  # (materials, 8): wr_kernel.C_* columns
         self.reset()
 
     def reset(self) -> None:
@@ -312,8 +267,7 @@ class WheelSoilLaw:
         )
 
     def lookup(self, material: int, load_n: float, slip: float) -> tuple[float, ...]:
-        """Steady state at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, lateral sinkage m
-        at lateral slip ``|slip| LAT_SLIP_MAX``)."""
+        """Steady state at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, Fb/W)."""
         return table_lookup(self._tables[material], float(self._consts[material, 0]), float(load_n), float(slip))
 
     def sinkage_m(self, normal_force_n: float, material: int, slip: float) -> float:

@@ -20,15 +20,12 @@ import numpy as np
 from numba import njit
 
 from rover_sim.sim.soil_kernel import contact_frame, py_max, py_min, shear_decay_gain
-from rover_sim.sim.soil_tables import LAT_SLIP_MAX, N_LOAD, N_SLIP
+from rover_sim.sim.soil_tables import N_LOAD, N_SLIP
 
 BOW_M = 0.002  # advance over which the front-loaded (resisting) stress distribution forms
 VEL_FILTER_S = 0.1  # window of the net motion that renews the soil under the patch
 ROLLING_EPS_M_S = 1e-4  # rim speeds below this count as "not rolling" for the reported slip ratio
 BRISTLE_DAMPING_RATIO = 0.7  # damping ratio of the shear spring (initial stiffness F_max / 2 K_0) per wheel
-PATCH_RELAX = 0.5  # each step the patch length moves this share of the way to the table's: the fixed point
-# L = L(j / L) is then stable where the patch grows steeply with slip (deep slip-sinkage); the steady state is the same
-N_WALL = 24  # points across the submerged side face of a wheel (side-wall bulldozing)
 
 UPDATE_M = 0.02  # contact travel between rut writes (half a 4 cm cell)
 BERM_CELLS = 2
@@ -37,16 +34,10 @@ BERM_SPREAD = 5.0  # a berm is at least this many rut depths wide
 # rows of the law's per-wheel output block (WheelSoilLaw.out_state)
 OUT_LOAD, OUT_SINKAGE, OUT_SLIP, OUT_LONG, OUT_LAT, OUT_CONTACT, OUT_TORQUE = range(7)
 # columns of the per-material constants (WheelSoilLaw.consts): C_K the longitudinal curve's short scale, C_K0 its
-# initial one (soil_tables.SoilParams.initial_shear_modulus_m, for the shear spring's damping), C_KY the lateral K_y,
-# C_D1, C_D2 Hegedus's bulldozing coefficients and C_GAMMA the soil's unit weight (soil_tables.hegedus_coefficients),
-# C_SKIN the soil's skin friction on a smooth face, tan(delta) / tan(phi) (the wheel's side walls)
-C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0, C_D1, C_D2, C_GAMMA, C_SKIN = range(12)
-LAT_COLUMN = 6  # the table's lateral-sinkage column (soil_tables.build_table)
-# entries of the deformable terrain's float parameters (DeformableTerrain); P_UPDATE the contact travel between rut
-# writes (UPDATE_M for the rover), P_FRONT how far beyond half its patch and that travel a rut is written ahead of
-# (and behind) a wheel, P_LEAD where ahead of it the depth of an earlier rut is read (the rover: 1.5 and 2.5 cells),
-# P_DEEPEN the growth of a wheel's sinkage that makes it write again without moving (the rover: 1 mm)
-P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_WALL_TAN, P_UPDATE, P_FRONT, P_LEAD, P_DEEPEN = range(12)
+# initial one (soil_tables.SoilParams.initial_shear_modulus_m, for the shear spring's damping), C_KY the lateral K_y
+C_INV_DU, C_TAN_PHI, C_COHESION, C_K, C_KY, C_N0, C_N1, C_K0 = range(8)
+# entries of the deformable terrain's float parameters (DeformableTerrain)
+P_CELL, P_X0, P_Y0, P_BASE, P_SCALE, P_ALPHA, P_WIDTH, P_WALL_TAN = range(8)
 _SPLIT = 134217729.0  # 2^27 + 1: Veltkamp's splitter for a double
 
 
@@ -110,7 +101,7 @@ def py_hypot(x: float, y: float) -> float:
 @njit(cache=True)
 def table_lookup(rows: np.ndarray, inv_du: float, load_n: float, slip: float) -> tuple[float, ...]:
     """Bilinear read of one material's table ``rows`` (``soil_tables.build_table``, as an (N_SLIP * N_LOAD, 7)
-    array) at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, lateral sinkage m)."""
+    array) at (load, slip): (sinkage m, H/W, R/W, T/(W r), contact length m, area m^2, Fb/W)."""
     u = math.sqrt(py_max(load_n, 0.0)) * inv_du
     iu = min(int(u), N_LOAD - 2)
     fu = py_min(u - iu, 1.0)
@@ -129,26 +120,6 @@ def table_lookup(rows: np.ndarray, inv_du: float, load_n: float, slip: float) ->
         w00 * a[5] + w01 * b[5] + w10 * c[5] + w11 * d[5],
         w00 * a[6] + w01 * b[6] + w10 * c[6] + w11 * d[6],
     )
-
-
-@njit(cache=True)
-def side_wall_n(z: float, r: float, coh: float, d1: float, d2: float, gamma: float) -> float:
-    """Hegedus bulldozing on the submerged side face of a wheel (a disc of radius ``r`` whose bottom is ``z`` below
-    the surface; ``z`` may exceed ``r``): ``int D1 (c h + D2 gamma h^2 / 2) dx`` over the face, ``h`` the depth of
-    soil against the face at ``x`` (Ishigami et al. 2007, eq. of the side-wall force; Hegedus 1960), N."""
-    if z <= 0.0:
-        return 0.0
-    zc = z - r  # depth of the wheel's centre below the surface
-    half_chord = math.sqrt(py_max(2.0 * r * z - z * z, 0.0)) if z < r else r
-    dx = 2.0 * half_chord / N_WALL
-    total = 0.0
-    for k in range(N_WALL):
-        x = -half_chord + (k + 0.5) * dx
-        e = math.sqrt(py_max(r * r - x * x, 0.0))
-        lo = py_max(zc + e, 0.0)  # depth of the face's bottom edge
-        hi = py_max(zc - e, 0.0)  # depth of its top edge (0 where it stands above the surface)
-        total += coh * (lo - hi) + 0.5 * d2 * gamma * (lo * lo - hi * hi)
-    return d1 * total * dx
 
 
 @njit(cache=True)
@@ -191,7 +162,7 @@ def wr_wheels(
     wheel (world frame, at the contact point) and the soil torque about its axle into ``forces`` (n, 4).
 
     ``sd``: the wheel-soil sensor block of ``models/mer/rover.xml``. ``tables`` (materials, N_SLIP * N_LOAD, 7),
-    ``consts`` (materials, 12: ``C_*`` columns). ``state`` (5, n): rows jx, jy, bow, patch length, presink (the
+    ``consts`` (materials, 7: ``C_*`` columns). ``state`` (5, n): rows jx, jy, bow, patch length, presink (the
     rut depth ahead, set by the deformable terrain), updated in place; ``vf`` (n, 3) the low-passed rim,
     longitudinal and lateral speeds; ``out`` (7, n) the ``OUT_*`` rows; ``axles`` (n, 3) each wheel's lateral
     unit vector of its last contact.
@@ -230,47 +201,32 @@ def wr_wheels(
         jy = py_min(py_max(jy0 * decay - v_y * gain, -L), L)
         jx_m[w], jy_m[w] = jx, jy
         i_m = jx / L
-        # step 2: the steady-state stresses at the mobilised slip; sideways slip deepens the sinkage by what the
-        # slip-sinkage adds for the whole shear displacement over the longitudinal one (the table's last column)
-        z, hn_, rn, tn, Lp, A, _ = table_lookup(rows, inv_du, W, i_m)
-        patch_m[w] = L + PATCH_RELAX * (Lp - L)
-        lat = abs(jy) / L
-        n_i = n0 + n1 * abs(i_m)
-        if lat > 0.0:  # lateral sinkage; at the same load the compaction resistance grows as sqrt(z) (Bekker)
-            s_all = math.sqrt(i_m * i_m + lat * lat)
-            z_all = table_lookup(rows, inv_du, W, py_min(s_all / LAT_SLIP_MAX, 1.0))[LAT_COLUMN]
-            z_long = table_lookup(rows, inv_du, W, py_min(abs(i_m) / LAT_SLIP_MAX, 1.0))[LAT_COLUMN]
-            if z_all > z_long:
-                z_deeper = z + (z_all - z_long)
-                rn *= math.sqrt(z_deeper / z)
-                z = z_deeper
-        # step 3: compaction resistance as a reaction, reduced in an earlier rut (Bekker's compaction work); the
-        # side wall pushing soil sideways (step 4) also rubs along it as the wheel advances (Coulomb, skin friction)
+        # step 2: the steady-state stresses at the mobilised slip
+        z, hn_, rn, tn, Lp, A, fbn = table_lookup(rows, inv_du, W, i_m)
+        patch_m[w] = Lp
+        lat = abs(jy) / Lp
+        if lat > abs(i_m):  # lateral sinkage
+            z = table_lookup(rows, inv_du, W, lat)[0]
+        # step 3: compaction resistance as a reaction, reduced in an earlier rut (Bekker's compaction work)
         bow = py_min(py_max(bow_m[w] + v_x * dt_s, -BOW_M), BOW_M)
         bow_m[w] = bow
-        q = abs(jy) / Ky
-        wall = 0.0
-        if q > 0.0:
-            wall = (1.0 - math.exp(-q)) * side_wall_n(z, r, coh, consts[mat, C_D1], consts[mat, C_D2],
-                                                      consts[mat, C_GAMMA])  # fmt: skip
-        wall_friction = consts[mat, C_SKIN] * tan_phi * wall
         zp = presink_m[w]
-        fresh = 1.0 - (zp / z) ** (1.0 + n_i) if z > zp else 0.0
-        f_long = W * (hn_ - rn * fresh * bow / BOW_M) - wall_friction * bow / BOW_M
-        # step 4: lateral shear with its own modulus, mean mobilisation over the patch, plus the side-wall
-        # bulldozing of the submerged face, mobilised by the whole sideways displacement
+        fresh = 1.0 - (zp / z) ** (1.0 + n0 + n1 * abs(i_m)) if z > zp else 0.0
+        f_long = W * (hn_ - rn * fresh * bow / BOW_M)
+        # step 4: lateral shear with its own modulus, mean mobilisation over the patch, plus side-wall bulldozing
         f_max = coh * A + W * tan_phi
+        q = abs(jy) / Ky
         mob = 1.0 - (1.0 - math.exp(-q)) / q if q > 1e-6 else 0.5 * q
         f_lat = mob * f_max * (1.0 if jy >= 0 else -1.0)
         f_t = math.sqrt(W * W * hn_ * hn_ + f_lat * f_lat)
         if f_t > f_max:  # longitudinal and lateral shear share the strength
             f_lat *= f_max / f_t
-        f_lat += wall * (1.0 if jy >= 0 else -1.0)
+        f_lat += mob * W * fbn * (1.0 if jy >= 0 else -1.0)
         # step 5: damping of the shear springs (LuGre sigma_1), zero at steady state
         sigma1 = BRISTLE_DAMPING_RATIO * 2.0 * math.sqrt(f_max / (2.0 * k0) * mass_share_kg)
         f_long += sigma1 * (jx - jx0) / dt_s
         f_lat += sigma1 * (k0 / Ky) * (jy - jy0) / dt_s
-        f_cap = f_max + wall + wall_friction + W * rn
+        f_cap = f_max + W * fbn + W * rn
         f_t = math.sqrt(f_long * f_long + f_lat * f_lat)
         if f_t > f_cap:
             f_long, f_lat = f_long * f_cap / f_t, f_lat * f_cap / f_t
@@ -332,7 +288,7 @@ def write_rut(h: np.ndarray, h0: np.ndarray, soft: np.ndarray, hfield: np.ndarra
     cell, base, scale, width, wall_tan = p[P_CELL], p[P_BASE], p[P_SCALE], p[P_WIDTH], p[P_WALL_TAN]
     # ahead: the patch plus the travel until the next write and a cell; behind the same, so a wheel that digs in
     # without advancing has a pit its rim does not touch at the back either (the ground plate sees the floor)
-    front, half_w = 0.5 * lp + p[P_UPDATE] + p[P_FRONT], 0.5 * width
+    front, half_w = 0.5 * lp + UPDATE_M + 1.5 * cell, 0.5 * width
     back = front
     shoulder = half_w + z / wall_tan  # the rut's walls stand at the soil's angle of repose
     reach = shoulder + py_max(BERM_CELLS * cell, BERM_SPREAD * z)
@@ -393,19 +349,14 @@ def deform_after_law(
     dirty: np.ndarray,
 ) -> None:
     """Per physics step, after the law: each loaded wheel on deformable soil reads the rut depth ahead of it into
-    the law's presink (``law_state[4]``) and, once its contact has moved ``p[P_UPDATE]`` or its low-passed sinkage
-    ``zf`` grew ``p[P_DEEPEN]`` since its last write (``last`` (n, 3): x, y, sinkage), writes its rut
-    (:func:`write_rut`)."""
+    the law's presink (``law_state[4]``) and, once its contact has moved ``UPDATE_M`` or its low-passed sinkage
+    ``zf`` grew 1 mm since its last write (``last`` (n, 3): x, y, sinkage), writes its rut (:func:`write_rut`)."""
     nrow, ncol = h.shape
     presink_m, patch_m = law_state[4], law_state[3]
-    alpha = p[P_ALPHA]
+    cell, alpha = p[P_CELL], p[P_ALPHA]
     for w in range(wheel_ids.shape[0]):
-        if not soft_material[materials[w]]:
+        if law_out[0, w] <= 0.0 or not soft_material[materials[w]]:
             presink_m[w] = zf[w] = 0.0
-            continue
-        if law_out[0, w] <= 0.0:  # lifted off: the low-passed sinkage decays (a bounce does not reset the rut)
-            presink_m[w] = 0.0
-            zf[w] -= alpha * zf[w]
             continue
         hx, hy = axles[w, 1], -axles[w, 0]  # heading = axle x up, projected
         hn = py_hypot(hx, hy)
@@ -419,13 +370,12 @@ def deform_after_law(
         along = (sd[7 * w + 4] - cx) * hx + (sd[7 * w + 5] - cy) * hy
         px, py = cx + along * hx, cy + along * hy
         lp = patch_m[w]
-        update = p[P_UPDATE]
-        lead = 0.5 * lp + update + p[P_LEAD]  # beyond this wheel's own footprint
+        lead = 0.5 * lp + UPDATE_M + 2.5 * cell  # beyond this wheel's own footprint
         i, j = _cell_of(px + lead * hx, py + lead * hy, p, nrow, ncol)
         presink_m[w] = py_max(h0[i, j] - h[i, j], 0.0)
         lx, ly, lz = last[w, 0], last[w, 1], last[w, 2]
         z = zf[w] = zf[w] + alpha * (law_out[1, w] - zf[w])
-        if (px - lx) ** 2 + (py - ly) ** 2 < update * update and z < lz + p[P_DEEPEN]:
+        if (px - lx) ** 2 + (py - ly) ** 2 < UPDATE_M * UPDATE_M and z < lz + 0.001:
             continue
         last[w, 0], last[w, 1], last[w, 2] = px, py, z
         write_rut(h, h0, soft, hfield, adr, p, dirty, px, py, hx, hy, z, lp)

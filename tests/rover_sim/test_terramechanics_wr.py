@@ -133,7 +133,7 @@ def test_lateral_slip_gives_a_restoring_side_force_with_bulldozing():
     for _ in range(4000):
         f = law.evaluate(inputs, [0], DT)
     assert f[1] > 5.0  # pushes back against the sideways (-y) sliding
-    assert law.lookup(0, W_N, 0.5)[6] > law.lookup(0, W_N, 0.0)[6] > 0  # lateral sinkage grows with the slip
+    assert law.lookup(0, W_N, 0.5)[6] > law.lookup(0, W_N, 0.0)[6] > 0  # side-wall bulldozing grows with sinkage
 
 
 # ------------------------------------------------------------------ slip emerging in the full simulation

@@ -13,7 +13,6 @@ import pytest
 from rover_sim.sim import deform, physics, terramechanics_wr
 from rover_sim.sim.terramechanics_wr import WheelSoilLaw
 from rover_sim.sim.wr_kernel import (
-    UPDATE_M,
     deform_after_law,
     py_hypot,
     table_lookup,
@@ -108,7 +107,7 @@ def _run_deform(fn, rng: np.random.Generator, steps: int = 300):
     h0 = rng.normal(scale=0.01, size=(nrow, ncol))
     soft = rng.random((nrow, ncol)) > 0.1  # some bedrock cells in the sand
     h, hfield = h0.copy(), np.zeros(nrow * ncol + 7, dtype=np.float32)
-    p = np.array([cell, -1.6, -1.2, -0.3, 0.6, 0.005 / 0.505, 0.16, 0.125, UPDATE_M, 1.5 * cell, 2.5 * cell, 0.001])
+    p = np.array([cell, -1.6, -1.2, -0.3, 0.6, 0.005 / 0.505, 0.16, 0.125])
     out, state, axles = np.zeros((7, N)), np.zeros((5, N)), np.zeros((N, 3))
     state[3] = 0.1
     zf, last, dirty = np.zeros(N), np.tile([np.inf, np.inf, 0.0], (N, 1)), np.zeros((2, 5), dtype=np.int64)

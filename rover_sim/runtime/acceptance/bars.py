@@ -133,44 +133,9 @@ class GlobalLocBar:
     min_seeds: int = 8
 
 
-@dataclass(frozen=True)
-class WheelBand:
-    """One cumulative slip-angle band of ``bench wheel``: the largest RMSE allowed over all rows of one wheel whose
-    slip angle is at most ``max_slip_angle_deg`` (every slip from -1 to 0.9)."""
-
-    max_slip_angle_deg: float
-    drawbar_over_load: float
-    lateral_over_load: float
-    sinkage_mm: float
-
-    @property
-    def key(self) -> str:
-        return f"0-{self.max_slip_angle_deg:g}"
-
-
-@dataclass(frozen=True)
-class WheelBar:
-    """``bench wheel``: the wheel-soil law on the single-wheel rig against measured single-wheel tests, per wheel.
-
-    RMSE of drawbar pull / load, lateral force / load and sinkage over the rows of each cumulative slip-angle band
-    (the soil validated against measured wheel tests); and at 0 deg the predicted drawbar pull non-decreasing
-    in slip from -1 to 0.9 (a sweep of the rig at the wheel's mean 0 deg load; a step may fall by at most
-    ``monotone_tolerance`` of the load, the rig's averaging noise: a tenth of the 0.02 trial-to-trial spread)."""
-
-    bands: tuple[WheelBand, ...] = (
-        WheelBand(30.0, 0.10, 0.20, 8.0),
-        WheelBand(60.0, 0.15, 0.25, 8.0),
-        WheelBand(90.0, 0.25, 0.50, 12.0),
-    )
-    monotone_slips: tuple[float, float] = (-1.0, 0.9)
-    monotone_tolerance: float = 0.002
-
-
 AUTONAV, STEREO, RENDER, DIMES, ROCKS = AutonavBar(), StereoBar(), RenderBar(), DimesBar(), RocksBar()
 SWEEP, SLIP, MOBILITY, TRAVERSE = SweepBar(), SlipBar(), MobilityBar(), TraverseBar()
 GLOBALLOC = GlobalLocBar()
-WHEEL = WheelBar()
-WHEEL_QUANTITIES = ("drawbar_over_load", "lateral_over_load", "sinkage_mm")
 
 
 def dimes_verdict(r: dict) -> Verdict:
@@ -392,30 +357,4 @@ def judge_globalloc(terrains: dict[str, dict], bar: GlobalLocBar = GLOBALLOC) ->
             v = b[key]
             if v is None or v > lim:
                 reasons.append(f"{name}: {key} {'not measured' if v is None else f'{v:.3f}'} (> {lim})")
-    return not reasons, reasons
-
-
-def judge_wheel(rmse_by_band: dict[str, dict[str, dict[str, float | None]]],
-                monotone_drops: dict[str, float]) -> tuple[bool, list[str]]:  # fmt: skip
-    """``bench wheel``'s verdict: ``rmse_by_band[wheel][band key][quantity]`` (None: not measured, not judged) and
-    ``monotone_drops[wheel]`` (the largest fall of DP/load between successive slips of the 0 deg sweep, 0 if it never
-    falls). Returns (passed, the reasons it failed); nothing measured at all is a failure."""
-    bar, reasons, judged = WHEEL, [], 0
-    for wheel, bands in rmse_by_band.items():
-        for band in bar.bands:
-            got = bands.get(band.key, {})
-            for q in WHEEL_QUANTITIES:
-                v, limit = got.get(q), getattr(band, q)
-                if v is None:
-                    continue
-                judged += 1
-                if v > limit:
-                    reasons.append(f"{wheel} {band.key} deg: {q} RMSE {v:.3g} > {limit:g}")
-    for wheel, drop in monotone_drops.items():
-        judged += 1
-        if drop > bar.monotone_tolerance:
-            reasons.append(f"{wheel} 0 deg: drawbar pull / load falls by {drop:.3f} (> {bar.monotone_tolerance:g}) "
-                           f"between successive slips")  # fmt: skip
-    if not judged:
-        reasons.append("nothing to judge: no measured rows and no 0 deg rows")
     return not reasons, reasons
