@@ -42,12 +42,29 @@ def hits(text: str) -> list[str]:
 
 
 def test_patterns_catch_process_words_and_spare_ordinary_ones():
-    for bad in ["as of session 9", "measured that session", "beside two helper jobs", "(issue #18)", "issue 8",
-                "#3 (issue", "stage 1 of the work", "sessions 5-14", "the session-7 run",
-                "the issue's bar", "Issue benchmark: a drive"]:
+    for bad in [
+        "as of session 9",
+        "measured that session",
+        "beside two helper jobs",
+        "(issue #18)",
+        "issue 8",
+        "#3 (issue",
+        "stage 1 of the work",
+        "sessions 5-14",
+        "the session-7 run",
+        "the issue's bar",
+        "Issue benchmark: a drive",
+    ]:
         assert hits(bad), bad
-    for fine in ["recording_helpers", "a helper function", 'scope="session"', "start_new_session=True",
-                 "the stage order of image formation", "once per test session", "an issue with the lens"]:
+    for fine in [
+        "recording_helpers",
+        "a helper function",
+        'scope="session"',
+        "start_new_session=True",
+        "the stage order of image formation",
+        "once per test session",
+        "an issue with the lens",
+    ]:
         assert not hits(fine), fine
 
 

@@ -63,7 +63,7 @@ class ReplayedVO:
         self.evaluator.vo_step(
             truth, res.status, res.motion_rover, out.commanded_m, int(res.n_inliers), out.ms,
             reason=str(getattr(res, "reason", "")), no_texture=bool(own.no_texture) if own else False,
-            covariance=getattr(res, "covariance", None),
+            covariance=getattr(res, "covariance", None), textured_frac=self.mission.evaluator.pair_textured_frac,
         )  # fmt: skip
         if res.status == "ok":
             self._record(truth)

@@ -59,6 +59,7 @@ METRICS: dict[str, Metric] = {
         Metric("vo_segment_1m_pct", "VO 1 m segments (%)", _segment("vo", "1m")),
         Metric("vo_segment_5m_pct", "VO 5 m segments (%)", _segment("vo", "5m")),
         Metric("vo_convergence_pct", "VO convergence (%)", _get("vo_convergence_pct"), higher_is_better=True),
+        Metric("vo_rotation_error_deg_per_m", "VO rotation error (deg/m)", _get("vo_rotation_error_deg_per_m")),
         Metric("false_positives", "VO false positives", _get("false_positives")),
         Metric("goal_distance_m", "goal distance (m)", _get("goal_distance_m")),
         Metric("vo_nees_step", "VO NEES per step", _nees("step_median")),

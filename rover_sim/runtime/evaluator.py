@@ -67,6 +67,7 @@ class VoStepRecord:
     no_texture: bool = False  # the pointing search found no pointing with texture: a refusal here is justified
     true_step_m: float = math.nan  # |true translation| since the previous pair
     textured_frac: float = math.nan  # truth: the smaller textured fraction of the two pairs' ground views
+    rotation_error_deg: float = math.nan  # angle between VO's and the true rotation of the step (NaN if no update)
 
     @property
     def false_positive(self) -> bool:
@@ -118,6 +119,9 @@ class Metrics:
     vo_textured_steps: int = 0
     vo_textured_accepted: int = 0
     vo_textured_convergence_pct: float | None = None
+    # KITTI-style rotational error of VO's accepted steps: the sum of each step's rotation error (deg) over their
+    # true travel (m); None without accepted steps over MIN_DISTANCE_FOR_PCT_M
+    vo_rotation_error_deg_per_m: float | None = None
     # wall-clock measurements: not deterministic, so written to timing.json rather than metrics.json
     timing: dict = field(default_factory=dict)
 
@@ -129,6 +133,11 @@ class Metrics:
         d = asdict(self)
         d.pop("timing")
         return d
+
+
+def rotation_angle_deg(R: np.ndarray) -> float:
+    """The angle of the rotation ``R`` (deg): the geodesic distance of two rotations ``A.T @ B``."""
+    return math.degrees(math.acos(min(1.0, max(-1.0, 0.5 * (float(np.trace(R)) - 1.0)))))
 
 
 def segment_errors_pct(
@@ -283,6 +292,12 @@ class Evaluator:
         self.body_collision_ticks += int(body_contact)
         self.tall_rock_contact_ticks += int(tall_rock_contact)
 
+    @property
+    def pair_textured_frac(self) -> float:
+        """Truth: the textured fraction of the ground view of the last VO pair scored (NaN before any); a VO
+        replayed on the same pairs scores its steps with it (:mod:`rover_sim.bench.replay`)."""
+        return self._last_textured_frac
+
     def vo_step(
         self,
         truth: Pose,
@@ -305,12 +320,13 @@ class Evaluator:
         if self._last_frame_truth is not None and status != "first_frame":
             true_motion = se3_inv(self._last_frame_truth) @ T_truth
             true_good = float(true_motion[0, 3])
-            vo_good, err = math.nan, math.nan
+            vo_good, err, rot_err = math.nan, math.nan, math.nan
             ok = status == "ok"
             step_error = None
             if ok:
                 vo_good = float(motion_rover[0, 3])
                 err = float(np.linalg.norm(motion_rover[:3, 3] - true_motion[:3, 3]))
+                rot_err = rotation_angle_deg(np.asarray(motion_rover, dtype=float)[:3, :3].T @ true_motion[:3, :3])
                 if covariance is not None:
                     R = self._last_frame_truth[:3, :3]
                     C = np.asarray(covariance, dtype=float)[:3, :3]
@@ -334,6 +350,7 @@ class Evaluator:
                 min(textured_frac, self._last_textured_frac)
                 if math.isfinite(textured_frac + self._last_textured_frac)
                 else math.nan,
+                rot_err,
             )
             self.vo_steps.append(rec)
         self._last_frame_truth = T_truth
@@ -405,6 +422,8 @@ class Evaluator:
         accepted = [s for s in judged if s.status == "ok"]
         conv = 100.0 * len(accepted) / len(judged) if judged else None
         fps = sum(1 for s in accepted if s.false_positive)
+        rot_m = sum(s.true_step_m for s in accepted)
+        rot = sum(s.rotation_error_deg for s in accepted) / rot_m if rot_m > MIN_DISTANCE_FOR_PCT_M else None
         refused = [s for s in judged if s.status != "ok"]
         reasons: dict[str, int] = {}
         for s in refused:
@@ -426,6 +445,7 @@ class Evaluator:
             dr_error_pct=pct(dr_err),
             vo_error_pct=pct(vo_err),
             vo_convergence_pct=round(conv, 2) if conv is not None else None,
+            vo_rotation_error_deg_per_m=round(rot, 4) if rot is not None else None,
             max_slip_pct=round(100 * float(np.max(true_slips)), 2),
             mean_slip_pct=round(100 * float(np.mean(true_slips)), 2),
             passed=False,

@@ -277,6 +277,7 @@ class GateBar:
     metrics: tuple[GateMetric, ...] = (
         GateMetric("vo_error_pct", "log", floor=0.10, offset=0.05),
         GateMetric("vo_convergence_pct", "identity", floor=5.0, worse="lower"),
+        GateMetric("vo_rotation_error_deg_per_m", "log", floor=0.10, offset=0.01),
         GateMetric("dr_error_pct", "log", floor=0.10, offset=0.05, two_sided=True, estimator=False),
         GateMetric("goal_distance_m", "log", floor=0.25, offset=0.1, estimator=False),
     )
