@@ -178,7 +178,7 @@ def baseline_table(data: dict) -> list[str]:
 
     seeds = data["seeds"]
     pert = data.get("perturbation") or {}
-    figures = ("dr_error_pct", "vo_error_pct", "vo_convergence_pct", "goal_distance_m")
+    figures = ("dr_error_pct", "vo_error_pct", "vo_convergence_pct", "vo_rotation_error_deg_per_m", "goal_distance_m")
     out = [
         f"`benchmarks/suite_baseline.json` ({data.get('format', '?')}): the baseline `rover-sim bench suite --fast` "
         f"gates against. {len(seeds)} seeds ({seeds[0]}–{seeds[-1]}, gate set), {data.get('profile', '?')} sensor "
@@ -198,6 +198,34 @@ def baseline_table(data: dict) -> list[str]:
             block = sc.get(run) or {}
             cells = " | ".join(_stats(list((block.get(f) or {}).values())) for f in figures)
             out.append(f"| {name} | {cell} | {'recorded' if run == 'per_seed' else 'perturbed'} | {cells} |")
+    return out + [""] + detectable_table(data)
+
+
+def detectable_table(data: dict) -> list[str]:
+    """The gate's minimum detectable relative change per scenario and gated metric, at the gate's own seeds and
+    strictest Holm threshold, from the spread between the baseline's recorded and perturbed runs
+    (:func:`rover_sim.bench.gate.min_detectable_rel`)."""
+    from rover_sim.bench import gate
+    from rover_sim.runtime.acceptance import GATE
+
+    base = gate.load_baseline(ROOT / "benchmarks" / "suite_baseline.json")
+    tests = gate.baseline_tests(base)
+    alpha = GATE.alpha / max(tests, 1)
+    keys = [m.key for m in GATE.metrics]
+    out = [
+        f"Minimum detectable relative change (80 % power, {len(data['seeds'])} paired seeds, the strictest Holm "
+        f"threshold {GATE.alpha:g} / {tests} = {alpha:.2g}; never below the metric's effect-size floor; `-`: not "
+        "measured on that scenario):",
+        "",
+        "| scenario | " + " | ".join(f"`{k}`" for k in keys) + " |",
+        "|---|" + "---:|" * len(keys),
+    ]
+    for name in data["scenarios"]:
+        cells = []
+        for m in GATE.metrics:
+            rel = gate.min_detectable_rel(m, base, name, len(data["seeds"]), alpha)
+            cells.append("-" if rel is None else f"{100 * rel:.1f} %")
+        out.append(f"| {name} | " + " | ".join(cells) + " |")
     return out + [""]
 
 
