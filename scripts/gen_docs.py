@@ -64,8 +64,11 @@ def _scenario_section(path: Path, note: str = "") -> list[str]:
         ("file", f"`{path.relative_to(ROOT)}`"),
         ("in the CI gate (`fast`)", "yes" if data.get("fast") else "no"),
         ("seed", str(data.get("seed", 0))),
-        ("terrain", ("streamed" if streamed else f"{size[0]} x {size[1]} m" if size else "-")
-         + (f", {terrain['cell_size_m']} m cells" if "cell_size_m" in terrain else "")),  # fmt: skip
+        (
+            "terrain",
+            ("streamed" if streamed else f"{size[0]} x {size[1]} m" if size else "-")
+            + (f", {terrain['cell_size_m']} m cells" if "cell_size_m" in terrain else ""),
+        ),  # fmt: skip
         ("physics", ", ".join(f"{k} = {json.dumps(v)}" for k, v in data.get("physics", {}).items()) or "defaults"),
         ("sensors", f"profile {data.get('sensors', {}).get('profile', 'flight (default)')}"),
         ("commands", _md_cell(_commands(data.get("commands", [])))),
@@ -229,6 +232,33 @@ def detectable_table(data: dict) -> list[str]:
     return out + [""]
 
 
+def autonav_table(path: Path) -> list[str]:
+    """``bench autonav --json`` (one or more files of the same field set): one row per field, and the totals."""
+    data = json.loads(path.read_text())
+    from rover_sim import interrupts
+
+    every = sorted(data["rows"], key=lambda r: r["seed"])
+    rows = [r for r in every if not interrupts.was_interrupted(r["reason"] or "")]
+    stopped = [r["seed"] for r in every if r not in rows]
+    reached = sum(r["reached"] for r in rows)
+    hits = sum(r["collision"] for r in rows)
+    seeds = [r["seed"] for r in rows]
+    out = [
+        f"`{path.relative_to(ROOT)}`: {len(rows)} rock fields (seeds {seeds[0]}–{seeds[-1]}; 10 % cover, rocks to "
+        f"60 cm, goal 20 m away, 150 cycles), stack `{data.get('stack', 'builtin')}`: **{reached} of {len(rows)} "
+        f"reached, {hits} with a collision** (acceptance: >= 95 % reached, 0 collisions)."
+        + (f" Field(s) {', '.join(map(str, stopped))} interrupted before the end: not counted." if stopped else ""),
+        "",
+        "| field | reached | goal distance (m) | collision | cycles | driven (m) | outcome |",
+        "|---:|:-:|---:|:-:|---:|---:|---|",
+    ]
+    for r in rows:
+        out.append(f"| {r['seed']} | {'yes' if r['reached'] else 'NO'} | {r['goal_distance_m']} | "
+                   f"{'YES' if r['collision'] else 'no'} | {r['cycles']} | {round(r['distance_m'], 1)} | "
+                   f"{r['outcome']} |")  # fmt: skip
+    return out + [""]
+
+
 def globalloc_table(path: Path) -> list[str]:
     data = json.loads(path.read_text())
     details = path.with_name(path.stem + ".details.json")
@@ -273,6 +303,11 @@ def benchmarks_page() -> str:
         lines += ["## Suite and VO runs", ""]
         for p in reports:
             lines += [markdown(json.loads(p.read_text()), title=f"`{p.relative_to(ROOT)}`"), ""]
+    autonav = sorted((ROOT / "benchmarks" / "results").glob("autonav_*.json"))
+    if autonav:
+        lines += ["## GESTALT autonav", ""]
+        for p in autonav:
+            lines += autonav_table(p)
     lines += ["## Global localisation", ""]
     for p in sorted((DOCS / "navigation").glob("globalloc_bench_*.json")):
         if not p.name.endswith(".details.json"):
