@@ -15,6 +15,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
+from tiny_scenario import TINY_TOML as TINY_DRIVE_TOML
 from typer.testing import CliRunner
 
 from rover_sim.cli.main import app
@@ -28,23 +29,12 @@ from rover_sim.scenario.loading import scenario_from_dict
 ROOT = Path(__file__).resolve().parents[2]
 RERUN = Path(sys.executable).with_name("rerun")
 
-TINY_TOML = """
-name = "tiny"
-seed = 3
-commands = [{type = "drive", distance_m = 0.6}]
-[terrain]
-size_m = [8, 6]
-cell_size_m = 0.05
-slope = {slope_deg = 12, azimuth_deg = 0}
-rocks = {cover_fraction = 0.05, min_height_m = 0.05, max_height_m = 0.12, exclusion_zones = [[-2, 0, 1.0]]}
-[start]
-x_m = -2.0
-[nav]
-vo = true
-vo_step_m = 0.3
-[pass]
+TINY_TOML = (
+    TINY_DRIVE_TOML
+    + """[pass]
 max_vo_error_pct = 3.0
 """
+)
 
 FLAT = {
     "name": "flat",

@@ -14,27 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tiny_scenario import TINY_TOML
 from typer.testing import CliRunner
 
 from rover_sim.cli.main import app
 from rover_sim.cli.status import ExitStatus
 
 ROOT = Path(__file__).resolve().parents[2]
-TINY_TOML = """
-name = "tiny"
-seed = 3
-commands = [{type = "drive", distance_m = 0.6}]
-[terrain]
-size_m = [8, 6]
-cell_size_m = 0.05
-slope = {slope_deg = 12, azimuth_deg = 0}
-rocks = {cover_fraction = 0.05, min_height_m = 0.05, max_height_m = 0.12, exclusion_zones = [[-2, 0, 1.0]]}
-[start]
-x_m = -2.0
-[nav]
-vo = true
-vo_step_m = 0.3
-"""
 
 
 @pytest.fixture
